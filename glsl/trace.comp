@@ -1,0 +1,87 @@
+#version 450
+// The trace kernel: one ray per invocation, closest hit, traversal variant chosen
+// by a specialization constant. Shared layouts live in glsl/shared/.
+//
+// Mesa lavapipe (22.x) gives each subgroup one budget of 65535 loop passes for
+// the whole run and silently ends loops when it is spent. Every loop here checks
+// that it ran to its end; a ray whose traversal was cut short (or hit the step
+// cap) is written as PRIM_INCOMPLETE, which the host reports, never as a miss.
+
+#extension GL_GOOGLE_include_directive : require
+
+#include "ray.glsl"
+#include "kdnode.glsl"
+#include "triangle.glsl"
+
+layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
+
+layout(constant_id = 0) const uint VARIANT = VARIANT_STACK;
+layout(constant_id = 1) const bool COUNTERS = false;
+
+layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { uvec2 nodes[]; };
+layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
+layout(std430, set = 0, binding = BINDING_TRIANGLES) readonly buffer Triangles { float tri_verts[]; };
+layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
+layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Counters { uint counters[]; };
+
+layout(push_constant) uniform Push { TraceParams params; };
+
+#include "common.glsl"
+#include "stack.glsl"
+#include "restart.glsl"
+
+bool ray_is_valid(Ray ray) {
+    bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
+    bool dir_ok = !any(isnan(ray.dir)) && any(notEqual(ray.dir, vec3(0.0)));
+    return origin_ok && dir_ok && !isnan(ray.tmin) && !isnan(ray.tmax);
+}
+
+void main() {
+    uint index = gl_GlobalInvocationID.x;
+    if (index >= params.ray_count) return;
+    Ray ray = rays[index];
+
+    Hit best;
+    best.t = ray.tmax;
+    best.prim_id = PRIM_MISS;
+    best.u = 0.0;
+    best.v = 0.0;
+    TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u);
+
+    if (!ray_is_valid(ray)) {
+        best.prim_id = PRIM_INVALID;
+    } else {
+        TraceRay r;
+        r.origin = ray.origin;
+        r.dir = ray.dir;
+        r.inv_dir = 1.0 / ray.dir;
+        r.tmin = ray.tmin;
+        r.tmax = ray.tmax;
+        r.wr = watertight_ray(ray.origin, ray.dir);
+        float t0, t1;
+        if (clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1)) {
+            bool finished;
+            if (VARIANT == VARIANT_RESTART) {
+                finished = trace_restart(r, t0, t1, best, c);
+            } else {
+                finished = trace_stack(r, t0, t1, best, c);
+            }
+            if (!finished) best.prim_id = PRIM_INCOMPLETE;
+        }
+    }
+    if (best.prim_id >= PRIM_INCOMPLETE) {
+        best.t = best.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
+        best.u = 0.0;
+        best.v = 0.0;
+    }
+    hits[index] = best;
+    if (COUNTERS) {
+        uint base = index * COUNTERS_PER_RAY;
+        counters[base + COUNTER_NODES] = c.nodes;
+        counters[base + COUNTER_LEAVES] = c.leaves;
+        counters[base + COUNTER_TRIANGLES] = c.triangles;
+        counters[base + COUNTER_RESTARTS] = c.restarts;
+        counters[base + COUNTER_STEPS] = c.steps;
+    }
+}

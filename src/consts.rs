@@ -1,0 +1,63 @@
+// Constants shared by Rust and GLSL. build.rs passes `SHADER_DEFINES` to every
+// kernel as `#define NAME value`, so each value is written once, here.
+
+/// Invocations per workgroup of the trace kernel (one ray per invocation).
+pub const TRACE_WORKGROUP_SIZE: u32 = 64;
+/// Deepest leaf the builder may create; also bounds the full traversal stack.
+pub const MAX_TREE_DEPTH: u32 = 48;
+/// Entries of the full per-ray stack (`stack` variant): one push per level at most.
+pub const MAX_STACK: u32 = MAX_TREE_DEPTH + 1;
+/// Traversal steps after which a ray gives up and is reported as capped.
+pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
+
+/// `Hit::prim_id` of a ray that hit nothing.
+pub const PRIM_MISS: u32 = 0xFFFF_FFFF;
+/// `Hit::prim_id` of an invalid ray (NaN or infinite origin, NaN or zero direction).
+pub const PRIM_INVALID: u32 = 0xFFFF_FFFE;
+/// `Hit::prim_id` of a ray whose traversal did not finish (step cap or driver loop cut-off).
+pub const PRIM_INCOMPLETE: u32 = 0xFFFF_FFFD;
+
+/// Traversal variant ids (specialization constant 0 of the trace kernel).
+pub const VARIANT_STACK: u32 = 0;
+pub const VARIANT_RESTART: u32 = 1;
+
+/// Descriptor bindings of the trace kernel (set 0).
+pub const BINDING_NODES: u32 = 0;
+pub const BINDING_PRIM_INDICES: u32 = 1;
+pub const BINDING_TRIANGLES: u32 = 2;
+pub const BINDING_RAYS: u32 = 3;
+pub const BINDING_HITS: u32 = 4;
+pub const BINDING_COUNTERS: u32 = 5;
+
+/// Per-ray counters written when counters are on (u32 each).
+pub const COUNTER_NODES: u32 = 0;
+pub const COUNTER_LEAVES: u32 = 1;
+pub const COUNTER_TRIANGLES: u32 = 2;
+pub const COUNTER_RESTARTS: u32 = 3;
+pub const COUNTER_STEPS: u32 = 4;
+pub const COUNTERS_PER_RAY: u32 = 8;
+
+/// Every constant above, as `#define`s for the shaders.
+pub const SHADER_DEFINES: &[(&str, u32)] = &[
+    ("TRACE_WORKGROUP_SIZE", TRACE_WORKGROUP_SIZE),
+    ("MAX_TREE_DEPTH", MAX_TREE_DEPTH),
+    ("MAX_STACK", MAX_STACK),
+    ("MAX_TRAVERSAL_STEPS", MAX_TRAVERSAL_STEPS),
+    ("PRIM_MISS", PRIM_MISS),
+    ("PRIM_INVALID", PRIM_INVALID),
+    ("PRIM_INCOMPLETE", PRIM_INCOMPLETE),
+    ("VARIANT_STACK", VARIANT_STACK),
+    ("VARIANT_RESTART", VARIANT_RESTART),
+    ("BINDING_NODES", BINDING_NODES),
+    ("BINDING_PRIM_INDICES", BINDING_PRIM_INDICES),
+    ("BINDING_TRIANGLES", BINDING_TRIANGLES),
+    ("BINDING_RAYS", BINDING_RAYS),
+    ("BINDING_HITS", BINDING_HITS),
+    ("BINDING_COUNTERS", BINDING_COUNTERS),
+    ("COUNTER_NODES", COUNTER_NODES),
+    ("COUNTER_LEAVES", COUNTER_LEAVES),
+    ("COUNTER_TRIANGLES", COUNTER_TRIANGLES),
+    ("COUNTER_RESTARTS", COUNTER_RESTARTS),
+    ("COUNTER_STEPS", COUNTER_STEPS),
+    ("COUNTERS_PER_RAY", COUNTERS_PER_RAY),
+];

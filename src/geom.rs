@@ -1,0 +1,207 @@
+//! Geometry shared by the builder, the CPU traversals and the GPU layouts:
+//! boxes, rays, hits and the watertight ray/triangle test.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+/// An axis-aligned box. The empty box has `min > max`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The empty box: the identity of `union`.
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        Aabb { min, max }
+    }
+
+    pub fn from_points(points: &[Vec3]) -> Self {
+        points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
+    }
+
+    pub fn grow(self, p: Vec3) -> Self {
+        Aabb { min: self.min.min(p), max: self.max.max(p) }
+    }
+
+    pub fn union(self, o: Aabb) -> Self {
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+
+    pub fn intersection(self, o: Aabb) -> Self {
+        Aabb { min: self.min.max(o.min), max: self.max.min(o.max) }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
+    }
+
+    pub fn extent(&self) -> Vec3 {
+        (self.max - self.min).max(Vec3::ZERO)
+    }
+
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    /// Surface area (0 for an empty box).
+    pub fn area(&self) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let e = self.extent();
+        2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+    }
+
+    /// True when the closed boxes share at least one point.
+    pub fn overlaps(&self, o: &Aabb) -> bool {
+        !self.intersection(*o).is_empty()
+    }
+
+    pub fn contains_box(&self, o: &Aabb) -> bool {
+        self.min.cmple(o.min).all() && o.max.cmple(self.max).all()
+    }
+}
+
+/// A ray as stored in ray files and GPU buffers (32 bytes, std430 `Ray` in
+/// `glsl/shared/ray.glsl`): the segment `origin + t * dir`, `tmin <= t <= tmax`.
+/// `dir` need not be normalized; `tmax` may be `+inf`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Ray {
+    pub origin: [f32; 3],
+    pub tmin: f32,
+    pub dir: [f32; 3],
+    pub tmax: f32,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Ray { origin: origin.into(), tmin, dir: dir.into(), tmax }
+    }
+
+    /// A ray is valid when its origin is finite, its direction has no NaN and is
+    /// not zero, and its bounds are not NaN. Invalid rays get `PRIM_INVALID`.
+    pub fn is_valid(&self) -> bool {
+        let o = Vec3::from(self.origin);
+        let d = Vec3::from(self.dir);
+        o.is_finite() && !d.is_nan() && d != Vec3::ZERO && !self.tmin.is_nan() && !self.tmax.is_nan()
+    }
+}
+
+/// A hit as stored in hit files and GPU buffers (16 bytes, std430 `Hit` in
+/// `glsl/shared/ray.glsl`). The hit point is `(1-u-v)·v0 + u·v1 + v·v2` of
+/// triangle `prim_id`; `prim_id` is `PRIM_MISS`, `PRIM_INVALID` or
+/// `PRIM_INCOMPLETE` when there is no hit.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Hit {
+    pub t: f32,
+    pub prim_id: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit { t: f32::INFINITY, prim_id: crate::consts::PRIM_MISS, u: 0.0, v: 0.0 };
+
+    pub fn is_hit(&self) -> bool {
+        self.prim_id < crate::consts::PRIM_INCOMPLETE
+    }
+}
+
+impl Default for Hit {
+    fn default() -> Self {
+        Hit::MISS
+    }
+}
+
+/// Per-ray constants of the watertight test (Woop, Benthin & Wald 2013, JCGT 2(1)):
+/// the dominant axis `kz` of the direction becomes z, and a shear maps the ray onto +z.
+/// Mirrored by `WatertightRay` in `glsl/shared/triangle.glsl`.
+#[derive(Clone, Copy, Debug)]
+pub struct WatertightRay {
+    pub kx: usize,
+    pub ky: usize,
+    pub kz: usize,
+    pub sx: f32,
+    pub sy: f32,
+    pub sz: f32,
+    pub origin: Vec3,
+}
+
+impl WatertightRay {
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        let a = dir.abs();
+        // Largest component; ties go to the lower axis, exactly as in the shader.
+        let mut kz = 0;
+        if a.y > a[kz] {
+            kz = 1;
+        }
+        if a.z > a[kz] {
+            kz = 2;
+        }
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Keep the winding: swap x and y when the dominant component is negative.
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / dir[kz];
+        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin }
+    }
+
+    /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
+    /// triangle at `tmin <= t <= tmax` (edges and vertices count as hits, both
+    /// faces are hit, a ray in the triangle's plane misses).
+    /// Every operation is an f32 operation in the same order as the shader's, so
+    /// CPU and GPU give the same bits.
+    #[inline]
+    pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let a = v0 - self.origin;
+        let b = v1 - self.origin;
+        let c = v2 - self.origin;
+        // Shear and scale the vertices into ray space.
+        let ax = a[kx] - self.sx * a[kz];
+        let ay = a[ky] - self.sy * a[kz];
+        let bx = b[kx] - self.sx * b[kz];
+        let by = b[ky] - self.sy * b[kz];
+        let cx = c[kx] - self.sx * c[kz];
+        let cy = c[ky] - self.sy * c[kz];
+        // Scaled barycentric coordinates (edge functions).
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        // On an edge, recompute in double precision so the sign is exact.
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+            u = (cx * by - cy * bx) as f32;
+            v = (ax * cy - ay * cx) as f32;
+            w = (bx * ay - by * ax) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let az = self.sz * a[kz];
+        let bz = self.sz * b[kz];
+        let cz = self.sz * c[kz];
+        let t_scaled = u * az + v * bz + w * cz;
+        let rcp_det = 1.0 / det;
+        let t = t_scaled * rcp_det;
+        if !(t >= tmin && t <= tmax) {
+            return None;
+        }
+        Some((t, v * rcp_det, w * rcp_det))
+    }
+}

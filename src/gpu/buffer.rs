@@ -1,0 +1,116 @@
+//! Storage buffers allocated with gpu-allocator.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::GpuContext;
+use crate::error::{Error, Result, VkContext};
+
+/// A buffer and its memory. Host-visible buffers (`CpuToGpu`, `GpuToCpu`) stay mapped.
+pub struct Buffer {
+    pub buffer: vk::Buffer,
+    pub size: u64,
+    allocation: Option<Allocation>,
+    ctx: Arc<GpuContext>,
+}
+
+impl Buffer {
+    /// Creates a buffer of `size` bytes (at least 4) named `name` for debugging.
+    pub fn new(
+        ctx: &Arc<GpuContext>,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+        name: &str,
+    ) -> Result<Buffer> {
+        let size = size.max(4);
+        if size > ctx.info.max_memory_allocation_size {
+            return Err(Error::DeviceLimit(format!(
+                "buffer '{name}' needs {size} bytes; the device allows {} per allocation",
+                ctx.info.max_memory_allocation_size
+            )));
+        }
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let device = &ctx.device;
+        // SAFETY: a valid create info on a live device.
+        let buffer = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        // SAFETY: `buffer` was just created on this device.
+        let requirements = unsafe { device.get_buffer_memory_requirements(buffer) };
+        let allocation = ctx.allocator().lock().unwrap_or_else(|p| p.into_inner()).allocate(&AllocationCreateDesc {
+            name,
+            requirements,
+            location,
+            linear: true,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        });
+        let allocation = match allocation {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: the buffer is unused and unbound.
+                unsafe { device.destroy_buffer(buffer, None) };
+                return Err(e.into());
+            }
+        };
+        // SAFETY: the allocation satisfies the buffer's requirements.
+        if let Err(result) = unsafe { device.bind_buffer_memory(buffer, allocation.memory(), allocation.offset()) } {
+            // SAFETY: the buffer is unused.
+            unsafe { device.destroy_buffer(buffer, None) };
+            let _ = ctx.allocator().lock().unwrap_or_else(|p| p.into_inner()).free(allocation);
+            return Err(Error::Vulkan { what: "vkBindBufferMemory", result });
+        }
+        Ok(Buffer { buffer, size, allocation: Some(allocation), ctx: ctx.clone() })
+    }
+
+    /// A device-local storage buffer holding `data`, filled through a staging buffer.
+    pub fn with_data(ctx: &Arc<GpuContext>, data: &[u8], usage: vk::BufferUsageFlags, name: &str) -> Result<Buffer> {
+        let size = (data.len() as u64).max(4);
+        let buffer = Buffer::new(ctx, size, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly, name)?;
+        let mut staging =
+            Buffer::new(ctx, size, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu, "staging")?;
+        staging.write(0, data)?;
+        ctx.submit_and_wait(|cmd| {
+            let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size }];
+            // SAFETY: both buffers are alive and large enough; `cmd` is recording.
+            unsafe { ctx.device.cmd_copy_buffer(cmd, staging.buffer, buffer.buffer, &region) };
+        })?;
+        Ok(buffer)
+    }
+
+    /// The mapped bytes of a host-visible buffer.
+    pub fn mapped(&self) -> Option<&[u8]> {
+        self.allocation.as_ref()?.mapped_slice()
+    }
+
+    fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+        self.allocation.as_mut()?.mapped_slice_mut()
+    }
+
+    /// Copies `data` into a host-visible buffer at `offset`.
+    pub fn write(&mut self, offset: usize, data: &[u8]) -> Result<()> {
+        let slice = self.mapped_mut().ok_or_else(|| Error::InvalidInput("write to a buffer that is not mapped".into()))?;
+        let end = offset.checked_add(data.len()).filter(|&e| e <= slice.len());
+        let end = end.ok_or_else(|| Error::InvalidInput("write past the end of a buffer".into()))?;
+        slice[offset..end].copy_from_slice(data);
+        Ok(())
+    }
+
+    /// Reads `len` bytes at `offset` of a host-visible buffer.
+    pub fn read(&self, offset: usize, len: usize) -> Result<&[u8]> {
+        let slice = self.mapped().ok_or_else(|| Error::InvalidInput("read from a buffer that is not mapped".into()))?;
+        slice.get(offset..offset + len).ok_or_else(|| Error::InvalidInput("read past the end of a buffer".into()))
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        // SAFETY: the owner guarantees no pending GPU work uses the buffer
+        // (every submission here waits for completion).
+        unsafe { self.ctx.device.destroy_buffer(self.buffer, None) };
+        if let Some(a) = self.allocation.take() {
+            let _ = self.ctx.allocator().lock().unwrap_or_else(|p| p.into_inner()).free(a);
+        }
+    }
+}

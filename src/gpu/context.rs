@@ -1,0 +1,503 @@
+//! The Vulkan context: instance, device, queue and allocator. Created headless
+//! here; the embedding issue adds adoption of an engine's own objects.
+
+use std::ffi::{c_void, CStr, CString};
+use std::mem::ManuallyDrop;
+use std::sync::{Arc, Mutex};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use crate::error::{Error, Result, VkContext};
+
+/// Whether to enable `VK_LAYER_KHRONOS_validation`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Validation {
+    Off,
+    /// On when the layer is installed (tests use this).
+    IfAvailable,
+    /// On, and an error when the layer is missing.
+    Required,
+}
+
+/// How to create a headless context.
+#[derive(Clone, Debug)]
+pub struct ContextOptions {
+    /// A device index or a case-insensitive name substring; `None` picks the best device.
+    pub device: Option<String>,
+    pub validation: Validation,
+}
+
+impl ContextOptions {
+    /// Reads `KDTRACE_DEVICE` (index or name substring) and `KDTRACE_VALIDATION`
+    /// (`1` = if available, `required`, anything else = off).
+    pub fn from_env() -> Self {
+        let validation = match std::env::var("KDTRACE_VALIDATION").as_deref() {
+            Ok("1") | Ok("on") => Validation::IfAvailable,
+            Ok("required") => Validation::Required,
+            _ => Validation::Off,
+        };
+        ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok().filter(|s| !s.is_empty()), validation }
+    }
+}
+
+/// What the library needs to know about the device.
+#[derive(Clone, Debug)]
+pub struct DeviceInfo {
+    pub name: String,
+    pub driver: String,
+    pub device_type: vk::PhysicalDeviceType,
+    pub api_version: u32,
+    pub subgroup_size: u32,
+    pub min_subgroup_size: u32,
+    pub max_subgroup_size: u32,
+    pub subgroup_size_control: bool,
+    pub max_storage_buffer_range: u64,
+    pub max_workgroup_count_x: u32,
+    pub max_memory_allocation_size: u64,
+    /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
+    pub timestamp_period_ns: Option<f64>,
+}
+
+impl std::fmt::Display for DeviceInfo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} ({:?}, {}, Vulkan {}.{}.{}, subgroup {} [{}..{}])",
+            self.name,
+            self.device_type,
+            self.driver,
+            vk::api_version_major(self.api_version),
+            vk::api_version_minor(self.api_version),
+            vk::api_version_patch(self.api_version),
+            self.subgroup_size,
+            self.min_subgroup_size,
+            self.max_subgroup_size
+        )
+    }
+}
+
+struct Debug {
+    loader: ash::ext::debug_utils::Instance,
+    messenger: vk::DebugUtilsMessengerEXT,
+    messages: Box<Mutex<Vec<String>>>,
+}
+
+/// A Vulkan device with one compute queue and a shared allocator.
+pub struct GpuContext {
+    _entry: ash::Entry,
+    pub instance: ash::Instance,
+    pub physical_device: vk::PhysicalDevice,
+    pub device: ash::Device,
+    pub queue: vk::Queue,
+    pub queue_family: u32,
+    pub info: DeviceInfo,
+    allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
+    queue_lock: Mutex<()>,
+    command_pool: Mutex<vk::CommandPool>,
+    debug: Option<Debug>,
+}
+
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    _types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: the layer passes a valid callback-data pointer for the duration of
+    // the call, and `user` is the `Mutex<Vec<String>>` boxed in `Debug`, which
+    // outlives the messenger.
+    unsafe {
+        let message = if data.is_null() || (*data).p_message.is_null() {
+            String::from("(no message)")
+        } else {
+            CStr::from_ptr((*data).p_message).to_string_lossy().into_owned()
+        };
+        let text = format!("[{severity:?}] {message}");
+        eprintln!("kdtrace: validation: {text}");
+        if let Some(messages) = (user as *const Mutex<Vec<String>>).as_ref() {
+            if let Ok(mut m) = messages.lock() {
+                m.push(text);
+            }
+        }
+    }
+    vk::FALSE
+}
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+
+impl GpuContext {
+    /// Creates an instance and a device on its own (no window, no surface).
+    pub fn headless(options: &ContextOptions) -> Result<Arc<GpuContext>> {
+        // SAFETY: loading the system Vulkan loader; its symbols are only used
+        // through ash's function tables.
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::Loader(e.to_string()))?;
+
+        // SAFETY: plain queries on a loaded entry.
+        let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
+        let has_validation = layers.iter().any(|l| l.layer_name_as_c_str() == Ok(VALIDATION_LAYER));
+        let validation = match options.validation {
+            Validation::Off => false,
+            Validation::IfAvailable => has_validation,
+            Validation::Required if has_validation => true,
+            Validation::Required => {
+                return Err(Error::NoDevice(
+                    "VK_LAYER_KHRONOS_validation is required but not installed (Debian: vulkan-validationlayers)".into(),
+                ))
+            }
+        };
+
+        // SAFETY: plain query.
+        let loader_version = unsafe { entry.try_enumerate_instance_version() }
+            .vk("vkEnumerateInstanceVersion")?
+            .unwrap_or(vk::API_VERSION_1_0);
+        let api_version = if loader_version >= vk::API_VERSION_1_3 { vk::API_VERSION_1_3 } else { vk::API_VERSION_1_2 };
+        let app_name = CString::new("kdtrace").unwrap();
+        let app_info = vk::ApplicationInfo::default()
+            .application_name(&app_name)
+            .engine_name(&app_name)
+            .api_version(api_version);
+        let layer_names: Vec<*const i8> = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
+        let ext_names: Vec<*const i8> = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        let create_info = vk::InstanceCreateInfo::default()
+            .application_info(&app_info)
+            .enabled_layer_names(&layer_names)
+            .enabled_extension_names(&ext_names);
+        // SAFETY: the create info and the strings it points to live until the call returns.
+        let instance = unsafe { entry.create_instance(&create_info, None) }.vk("vkCreateInstance")?;
+
+        let debug = if validation {
+            let loader = ash::ext::debug_utils::Instance::new(&entry, &instance);
+            let messages: Box<Mutex<Vec<String>>> = Box::default();
+            let info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+                .message_severity(
+                    vk::DebugUtilsMessageSeverityFlagsEXT::WARNING | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+                )
+                .message_type(
+                    vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                        | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                        | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+                )
+                .pfn_user_callback(Some(debug_callback))
+                .user_data(&*messages as *const Mutex<Vec<String>> as *mut c_void);
+            // SAFETY: `messages` is boxed and kept in `Debug` until the messenger is destroyed.
+            let messenger = unsafe { loader.create_debug_utils_messenger(&info, None) };
+            match messenger {
+                Ok(messenger) => Some(Debug { loader, messenger, messages }),
+                Err(result) => {
+                    // SAFETY: nothing else was created from this instance.
+                    unsafe { instance.destroy_instance(None) };
+                    return Err(Error::Vulkan { what: "vkCreateDebugUtilsMessengerEXT", result });
+                }
+            }
+        } else {
+            None
+        };
+
+        match Self::create_device(entry.clone(), instance.clone(), options, debug) {
+            Ok(ctx) => Ok(Arc::new(ctx)),
+            Err((e, debug)) => {
+                // SAFETY: the device was not created (or already destroyed); only
+                // the messenger and the instance remain.
+                unsafe {
+                    if let Some(d) = debug {
+                        d.loader.destroy_debug_utils_messenger(d.messenger, None);
+                    }
+                    instance.destroy_instance(None);
+                }
+                Err(e)
+            }
+        }
+    }
+
+    fn create_device(
+        entry: ash::Entry,
+        instance: ash::Instance,
+        options: &ContextOptions,
+        debug: Option<Debug>,
+    ) -> std::result::Result<GpuContext, (Error, Option<Debug>)> {
+        let (physical_device, queue_family, info) = match pick_device(&instance, options) {
+            Ok(p) => p,
+            Err(e) => return Err((e, debug)),
+        };
+        // SAFETY: `physical_device` came from this instance.
+        let features = unsafe { instance.get_physical_device_features(physical_device) };
+        if features.shader_float64 == vk::FALSE {
+            return Err((
+                Error::DeviceLimit(format!(
+                    "{} lacks shaderFloat64, which the watertight test's exact fallback needs",
+                    info.name
+                )),
+                debug,
+            ));
+        }
+        let enabled = vk::PhysicalDeviceFeatures::default().shader_float64(true).shader_int64(features.shader_int64 != 0);
+        let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
+            .subgroup_size_control(info.subgroup_size_control)
+            .compute_full_subgroups(info.subgroup_size_control);
+        let priorities = [1.0f32];
+        let queue_infos =
+            [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
+        let mut create_info =
+            vk::DeviceCreateInfo::default().queue_create_infos(&queue_infos).enabled_features(&enabled);
+        if info.api_version >= vk::API_VERSION_1_3 {
+            create_info = create_info.push_next(&mut features13);
+        }
+        // SAFETY: the create info and everything it points to outlive the call.
+        let device = match unsafe { instance.create_device(physical_device, &create_info, None) } {
+            Ok(d) => d,
+            Err(result) => return Err((Error::Vulkan { what: "vkCreateDevice", result }, debug)),
+        };
+        // SAFETY: queue 0 of a family requested above.
+        let queue = unsafe { device.get_device_queue(queue_family, 0) };
+
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        });
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: valid device and create info.
+        let pool = unsafe { device.create_command_pool(&pool_info, None) };
+        let (allocator, pool) = match (allocator, pool) {
+            (Ok(a), Ok(p)) => (a, p),
+            (a, p) => {
+                let err = match (a.err(), p.err()) {
+                    (Some(e), _) => Error::Allocation(e),
+                    (None, Some(result)) => Error::Vulkan { what: "vkCreateCommandPool", result },
+                    _ => unreachable!(),
+                };
+                // SAFETY: nothing else was created on this device... except possibly
+                // the pool; it is destroyed with the device.
+                unsafe { device.destroy_device(None) };
+                return Err((err, debug));
+            }
+        };
+
+        Ok(GpuContext {
+            _entry: entry,
+            instance,
+            physical_device,
+            device,
+            queue,
+            queue_family,
+            info,
+            allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
+            queue_lock: Mutex::new(()),
+            command_pool: Mutex::new(pool),
+            debug,
+        })
+    }
+
+    /// The allocator shared by every buffer on this device.
+    pub fn allocator(&self) -> &Arc<Mutex<Allocator>> {
+        &self.allocator
+    }
+
+    /// True when validation messages are being collected.
+    pub fn validation_enabled(&self) -> bool {
+        self.debug.is_some()
+    }
+
+    /// Takes the validation messages reported so far.
+    pub fn take_validation_messages(&self) -> Vec<String> {
+        match &self.debug {
+            Some(d) => std::mem::take(&mut *d.messages.lock().unwrap_or_else(|p| p.into_inner())),
+            None => Vec::new(),
+        }
+    }
+
+    /// Fails with `Error::Validation` when the layer reported anything.
+    pub fn check_validation(&self) -> Result<()> {
+        let messages = self.take_validation_messages();
+        if messages.is_empty() {
+            Ok(())
+        } else {
+            Err(Error::Validation(messages))
+        }
+    }
+
+    /// Records commands with `record` into a one-time command buffer, submits it
+    /// on the context's queue and waits for it.
+    pub fn submit_and_wait(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+        let pool = self.command_pool.lock().unwrap_or_else(|p| p.into_inner());
+        let alloc_info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(*pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool is externally synchronised by the mutex held above.
+        let cmd = unsafe { self.device.allocate_command_buffers(&alloc_info) }.vk("vkAllocateCommandBuffers")?[0];
+        let result = (|| {
+            let begin = vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+            // SAFETY: a freshly allocated command buffer.
+            unsafe { self.device.begin_command_buffer(cmd, &begin) }.vk("vkBeginCommandBuffer")?;
+            record(cmd);
+            // SAFETY: recording was begun above.
+            unsafe { self.device.end_command_buffer(cmd) }.vk("vkEndCommandBuffer")?;
+            // SAFETY: a plain fence.
+            let fence = unsafe { self.device.create_fence(&vk::FenceCreateInfo::default(), None) }.vk("vkCreateFence")?;
+            let cmds = [cmd];
+            let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+            let submitted = {
+                let _queue = self.queue_lock.lock().unwrap_or_else(|p| p.into_inner());
+                // SAFETY: the queue is externally synchronised by `queue_lock`.
+                unsafe { self.device.queue_submit(self.queue, &submit, fence) }.vk("vkQueueSubmit")
+            };
+            let waited = submitted.and_then(|_| {
+                // SAFETY: waiting on a fence of this device.
+                unsafe { self.device.wait_for_fences(&[fence], true, u64::MAX) }.vk("vkWaitForFences")
+            });
+            // SAFETY: the fence is no longer in use (waited, or never submitted).
+            unsafe { self.device.destroy_fence(fence, None) };
+            waited
+        })();
+        // SAFETY: the command buffer finished (or never ran); the pool is locked.
+        unsafe { self.device.free_command_buffers(*pool, &[cmd]) };
+        result
+    }
+}
+
+impl Drop for GpuContext {
+    fn drop(&mut self) {
+        // SAFETY: every object made from this context holds an `Arc` to it, so
+        // none is alive now; destroy in reverse order of creation.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            let pool = *self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner());
+            self.device.destroy_command_pool(pool, None);
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            if let Some(d) = &self.debug {
+                let left = d.messages.lock().map(|m| m.len()).unwrap_or(0);
+                if left > 0 {
+                    eprintln!("kdtrace: {left} validation message(s) were not checked before the context was dropped");
+                }
+                d.loader.destroy_debug_utils_messenger(d.messenger, None);
+            }
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+fn device_type_rank(t: vk::PhysicalDeviceType) -> u32 {
+    match t {
+        vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+        vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+        vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+        vk::PhysicalDeviceType::CPU => 3,
+        _ => 4,
+    }
+}
+
+/// Lists the devices with a compute queue: (index, name, type).
+pub fn list_devices() -> Result<Vec<DeviceInfo>> {
+    // SAFETY: loading the system loader; a throwaway instance with no layers.
+    unsafe {
+        let entry = ash::Entry::load().map_err(|e| Error::Loader(e.to_string()))?;
+        let app_info = vk::ApplicationInfo::default().api_version(vk::API_VERSION_1_2);
+        let instance = entry
+            .create_instance(&vk::InstanceCreateInfo::default().application_info(&app_info), None)
+            .vk("vkCreateInstance")?;
+        let result = instance.enumerate_physical_devices().vk("vkEnumeratePhysicalDevices").map(|devices| {
+            devices.into_iter().filter_map(|pd| compute_family(&instance, pd).map(|_| describe(&instance, pd))).collect()
+        });
+        instance.destroy_instance(None);
+        result
+    }
+}
+
+fn compute_family(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Option<u32> {
+    // SAFETY: `pd` came from `instance`.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).map(|i| i as u32)
+}
+
+fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice) -> DeviceInfo {
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup).push_next(&mut driver);
+    // SAFETY: `pd` came from `instance`; the chained structs live on this frame.
+    let base = unsafe { instance.get_physical_device_properties(pd) };
+    let has_13 = base.api_version >= vk::API_VERSION_1_3;
+    if has_13 {
+        props2 = props2.push_next(&mut size_control);
+    }
+    // SAFETY: as above.
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    let props = props2.properties;
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+    let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f13);
+    if has_13 {
+        // SAFETY: as above.
+        unsafe { instance.get_physical_device_features2(pd, &mut f2) };
+    }
+    let mut maint3 = vk::PhysicalDeviceMaintenance3Properties::default();
+    let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut maint3);
+    // SAFETY: as above.
+    unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
+    let family = compute_family(instance, pd).unwrap_or(0);
+    // SAFETY: as above.
+    let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
+    let has_timestamps = families.get(family as usize).is_some_and(|f| f.timestamp_valid_bits > 0);
+    let control = has_13 && f13.subgroup_size_control != 0 && f13.compute_full_subgroups != 0;
+    DeviceInfo {
+        name: props.device_name_as_c_str().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+        driver: format!(
+            "{} {}",
+            driver.driver_name_as_c_str().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            driver.driver_info_as_c_str().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+        ),
+        device_type: props.device_type,
+        api_version: props.api_version,
+        subgroup_size: subgroup.subgroup_size,
+        min_subgroup_size: if control { size_control.min_subgroup_size } else { subgroup.subgroup_size },
+        max_subgroup_size: if control { size_control.max_subgroup_size } else { subgroup.subgroup_size },
+        subgroup_size_control: control,
+        max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+        max_workgroup_count_x: props.limits.max_compute_work_group_count[0],
+        max_memory_allocation_size: maint3.max_memory_allocation_size,
+        timestamp_period_ns: (has_timestamps && props.limits.timestamp_compute_and_graphics != 0)
+            .then_some(props.limits.timestamp_period as f64),
+    }
+}
+
+fn pick_device(instance: &ash::Instance, options: &ContextOptions) -> Result<(vk::PhysicalDevice, u32, DeviceInfo)> {
+    // SAFETY: plain query on a live instance.
+    let devices = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+    let mut candidates: Vec<(usize, vk::PhysicalDevice, u32, DeviceInfo)> = devices
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, pd)| compute_family(instance, pd).map(|q| (i, pd, q, describe(instance, pd))))
+        .filter(|(_, _, _, info)| info.api_version >= vk::API_VERSION_1_2)
+        .collect();
+    if candidates.is_empty() {
+        return Err(Error::NoDevice(
+            "no Vulkan 1.2 device with a compute queue (install mesa-vulkan-drivers for lavapipe)".into(),
+        ));
+    }
+    let names = || candidates.iter().map(|c| format!("{}: {}", c.0, c.3.name)).collect::<Vec<_>>().join(", ");
+    let chosen = match &options.device {
+        Some(want) => {
+            let by_index = want.parse::<usize>().ok().and_then(|i| candidates.iter().position(|c| c.0 == i));
+            let by_name = || {
+                let w = want.to_lowercase();
+                candidates.iter().position(|c| c.3.name.to_lowercase().contains(&w))
+            };
+            by_index
+                .or_else(by_name)
+                .ok_or_else(|| Error::NoDevice(format!("KDTRACE_DEVICE={want} matches none of [{}]", names())))?
+        }
+        None => {
+            candidates.sort_by_key(|c| (device_type_rank(c.3.device_type), c.0));
+            0
+        }
+    };
+    let (_, pd, q, info) = candidates.swap_remove(chosen);
+    Ok((pd, q, info))
+}

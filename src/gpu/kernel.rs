@@ -1,0 +1,278 @@
+//! Compute kernels: a pipeline over N storage-buffer bindings with push constants
+//! and specialization constants, plus GPU timestamps.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::{Buffer, GpuContext};
+use crate::error::{Error, Result, VkContext};
+
+/// A compute pipeline whose set 0 holds storage buffers at bindings `0..bindings`.
+pub struct Kernel {
+    pub pipeline: vk::Pipeline,
+    pub layout: vk::PipelineLayout,
+    pub set_layout: vk::DescriptorSetLayout,
+    pub bindings: u32,
+    pub push_constant_size: u32,
+    pub workgroup_size: u32,
+    ctx: Arc<GpuContext>,
+}
+
+/// How to specialize a kernel.
+#[derive(Clone, Debug, Default)]
+pub struct KernelDesc<'a> {
+    pub name: &'a str,
+    pub spirv: &'a [u8],
+    pub bindings: u32,
+    pub push_constant_size: u32,
+    /// Specialization constants with ids 0, 1, 2, ... (32-bit each; bools as 0/1).
+    pub spec_constants: &'a [u32],
+    /// The kernel's `local_size_x`, so `dispatch` can take thread counts.
+    pub workgroup_size: u32,
+    /// A required subgroup size (`VK_EXT_subgroup_size_control`, full subgroups).
+    pub required_subgroup_size: Option<u32>,
+}
+
+impl Kernel {
+    pub fn new(ctx: &Arc<GpuContext>, desc: &KernelDesc) -> Result<Kernel> {
+        let device = &ctx.device;
+        let code = ash::util::read_spv(&mut std::io::Cursor::new(desc.spirv))
+            .map_err(|e| Error::InvalidInput(format!("kernel {}: bad SPIR-V: {e}", desc.name)))?;
+        let bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..desc.bindings)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        if let Some(size) = desc.required_subgroup_size {
+            let info = &ctx.info;
+            if !info.subgroup_size_control || size < info.min_subgroup_size || size > info.max_subgroup_size {
+                return Err(Error::DeviceLimit(format!(
+                    "subgroup size {size} is not available on {} (allowed: {}..{}, control: {})",
+                    info.name, info.min_subgroup_size, info.max_subgroup_size, info.subgroup_size_control
+                )));
+            }
+        }
+
+        // SAFETY: valid create infos on a live device; every object created here is
+        // destroyed in `Drop` or on the error paths below.
+        unsafe {
+            let module = device
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&code), None)
+                .vk("vkCreateShaderModule")?;
+            let set_layout = device
+                .create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings), None)
+                .vk("vkCreateDescriptorSetLayout");
+            let set_layout = match set_layout {
+                Ok(s) => s,
+                Err(e) => {
+                    device.destroy_shader_module(module, None);
+                    return Err(e);
+                }
+            };
+            let push_ranges = [vk::PushConstantRange::default()
+                .stage_flags(vk::ShaderStageFlags::COMPUTE)
+                .offset(0)
+                .size(desc.push_constant_size)];
+            let set_layouts = [set_layout];
+            let mut layout_info = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
+            if desc.push_constant_size > 0 {
+                layout_info = layout_info.push_constant_ranges(&push_ranges);
+            }
+            let layout = match device.create_pipeline_layout(&layout_info, None).vk("vkCreatePipelineLayout") {
+                Ok(l) => l,
+                Err(e) => {
+                    device.destroy_descriptor_set_layout(set_layout, None);
+                    device.destroy_shader_module(module, None);
+                    return Err(e);
+                }
+            };
+            let entries: Vec<vk::SpecializationMapEntry> = (0..desc.spec_constants.len())
+                .map(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 })
+                .collect();
+            let data: &[u8] = bytemuck::cast_slice(desc.spec_constants);
+            let spec = vk::SpecializationInfo::default().map_entries(&entries).data(data);
+            let mut subgroup = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default()
+                .required_subgroup_size(desc.required_subgroup_size.unwrap_or(0));
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(c"main")
+                .specialization_info(&spec);
+            if desc.required_subgroup_size.is_some() {
+                stage = stage.push_next(&mut subgroup).flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS);
+            }
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+            let pipeline = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            device.destroy_shader_module(module, None);
+            let pipeline = match pipeline {
+                Ok(p) => p[0],
+                Err((_, result)) => {
+                    device.destroy_pipeline_layout(layout, None);
+                    device.destroy_descriptor_set_layout(set_layout, None);
+                    return Err(Error::Vulkan { what: "vkCreateComputePipelines", result });
+                }
+            };
+            Ok(Kernel {
+                pipeline,
+                layout,
+                set_layout,
+                bindings: desc.bindings,
+                push_constant_size: desc.push_constant_size,
+                workgroup_size: desc.workgroup_size.max(1),
+                ctx: ctx.clone(),
+            })
+        }
+    }
+
+    /// Records a dispatch of `threads` invocations (rounded up to whole workgroups).
+    ///
+    /// # Safety
+    /// `cmd` must be recording, and `set` must be a descriptor set of this kernel's
+    /// layout whose buffers stay alive until the command buffer completes.
+    pub unsafe fn record_dispatch(&self, cmd: vk::CommandBuffer, set: vk::DescriptorSet, push: &[u8], threads: u32) {
+        let device = &self.ctx.device;
+        device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+        device.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[set], &[]);
+        if !push.is_empty() {
+            device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
+        }
+        device.cmd_dispatch(cmd, threads.div_ceil(self.workgroup_size), 1, 1);
+    }
+}
+
+impl Drop for Kernel {
+    fn drop(&mut self) {
+        // SAFETY: no pending work uses the pipeline (submissions wait).
+        unsafe {
+            self.ctx.device.destroy_pipeline(self.pipeline, None);
+            self.ctx.device.destroy_pipeline_layout(self.layout, None);
+            self.ctx.device.destroy_descriptor_set_layout(self.set_layout, None);
+        }
+    }
+}
+
+/// A descriptor pool holding one set of storage buffers.
+pub struct BufferSet {
+    pub set: vk::DescriptorSet,
+    pool: vk::DescriptorPool,
+    ctx: Arc<GpuContext>,
+}
+
+impl BufferSet {
+    /// A set for `kernel` with `buffers[i]` bound (whole) at binding `i`.
+    pub fn new(ctx: &Arc<GpuContext>, kernel: &Kernel, buffers: &[&Buffer]) -> Result<BufferSet> {
+        if buffers.len() as u32 != kernel.bindings {
+            return Err(Error::InvalidInput(format!(
+                "kernel has {} bindings, {} buffers given",
+                kernel.bindings,
+                buffers.len()
+            )));
+        }
+        let device = &ctx.device;
+        let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: kernel.bindings }];
+        // SAFETY: valid create/allocate infos; the pool is destroyed in Drop.
+        unsafe {
+            let pool = device
+                .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
+                .vk("vkCreateDescriptorPool")?;
+            let layouts = [kernel.set_layout];
+            let set = match device
+                .allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts),
+                )
+                .vk("vkAllocateDescriptorSets")
+            {
+                Ok(s) => s[0],
+                Err(e) => {
+                    device.destroy_descriptor_pool(pool, None);
+                    return Err(e);
+                }
+            };
+            let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+                .iter()
+                .map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: 0, range: vk::WHOLE_SIZE }])
+                .collect();
+            let writes: Vec<vk::WriteDescriptorSet> = infos
+                .iter()
+                .enumerate()
+                .map(|(i, info)| {
+                    vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(i as u32)
+                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                        .buffer_info(info)
+                })
+                .collect();
+            device.update_descriptor_sets(&writes, &[]);
+            Ok(BufferSet { set, pool, ctx: ctx.clone() })
+        }
+    }
+}
+
+impl Drop for BufferSet {
+    fn drop(&mut self) {
+        // SAFETY: no pending work uses the set.
+        unsafe { self.ctx.device.destroy_descriptor_pool(self.pool, None) };
+    }
+}
+
+/// A pool of GPU timestamps.
+pub struct Timestamps {
+    pub pool: vk::QueryPool,
+    pub count: u32,
+    period_ns: f64,
+    ctx: Arc<GpuContext>,
+}
+
+impl Timestamps {
+    /// `None` when the device's compute queue has no timestamps.
+    pub fn new(ctx: &Arc<GpuContext>, count: u32) -> Result<Option<Timestamps>> {
+        let Some(period_ns) = ctx.info.timestamp_period_ns else { return Ok(None) };
+        let info = vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(count);
+        // SAFETY: valid create info.
+        let pool = unsafe { ctx.device.create_query_pool(&info, None) }.vk("vkCreateQueryPool")?;
+        Ok(Some(Timestamps { pool, count, period_ns, ctx: ctx.clone() }))
+    }
+
+    /// Records a reset of all queries.
+    ///
+    /// # Safety
+    /// `cmd` must be recording outside a render pass.
+    pub unsafe fn record_reset(&self, cmd: vk::CommandBuffer) {
+        self.ctx.device.cmd_reset_query_pool(cmd, self.pool, 0, self.count);
+    }
+
+    /// Records timestamp `index` after all prior work.
+    ///
+    /// # Safety
+    /// `cmd` must be recording; `index < count` and reset earlier in `cmd`.
+    pub unsafe fn record(&self, cmd: vk::CommandBuffer, index: u32) {
+        self.ctx.device.cmd_write_timestamp(cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, self.pool, index);
+    }
+
+    /// Seconds between timestamps `a` and `b` of a completed submission.
+    pub fn seconds_between(&self, a: u32, b: u32) -> Result<f64> {
+        let mut data = vec![0u64; self.count as usize];
+        // SAFETY: the pool has `count` queries, and the caller waited for completion.
+        unsafe {
+            self.ctx
+                .device
+                .get_query_pool_results(self.pool, 0, &mut data, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT)
+                .vk("vkGetQueryPoolResults")?;
+        }
+        let ticks = data[b as usize].wrapping_sub(data[a as usize]);
+        Ok(ticks as f64 * self.period_ns * 1e-9)
+    }
+}
+
+impl Drop for Timestamps {
+    fn drop(&mut self) {
+        // SAFETY: no pending work uses the pool.
+        unsafe { self.ctx.device.destroy_query_pool(self.pool, None) };
+    }
+}

@@ -1,0 +1,1037 @@
+//! A first SAH kd-tree builder: the surface area heuristic (Goldsmith & Salmon
+//! 1987; MacDonald & Booth 1990) with the termination rules of pbrt-v3
+//! (Pharr, Jakob & Humphreys, *Physically Based Rendering*, 3rd ed., §4.4).
+//!
+//! At every node and on each of the three axes, the start/end events of the
+//! triangles' bounding boxes, clipped to the node box, are sorted and swept to
+//! find the plane of least SAH cost. That is O(N log² N) overall; Wald & Havran
+//! 2006 ("On building fast kd-trees for ray tracing, and on doing that in
+//! O(N log N)") replace the per-node sort and clip the triangles themselves
+//! ("perfect splits"); this builder clips only their boxes.
+//!
+//! The result is the 8-byte node array of [`KdNode`] in depth-first order: the
+//! below child of an interior node is the next node, the above child is stored
+//! in the node. Leaves own contiguous ranges of `prim_indices`.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::node::{KdNode, MAX_NODE_FIELD};
+use super::stats::BuildStats;
+use crate::consts::{MAX_TREE_DEPTH, PRIM_INCOMPLETE};
+use crate::geom::Aabb;
+
+/// Parameters of the SAH builder.
+///
+/// The SAH cost of splitting a node `V` into `B` (below) and `A` (above) is
+/// `K_T + K_I · (1 − b) · (A(B)/A(V) · n_B + A(A)/A(V) · n_A)`, where `A(·)` is a
+/// surface area and `b` the empty bonus when one side has no triangle; the cost
+/// of a leaf is `K_I · n`. Only the ratio `K_T / K_I` and `b` shape the tree.
+///
+/// Published defaults: pbrt-v3 uses `K_I = 80, K_T = 1, b = 0.5` and at most
+/// one triangle per leaf before it stops splitting; Wald & Havran 2006 use
+/// `K_T = 15, K_I = 20` and `λ(p) = 0.8` for an empty side, i.e. `b = 0.2`.
+/// [`Default`] is pbrt-v3's, until measurements say otherwise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildConfig {
+    /// `K_T`, the cost of traversing one interior node. Higher values (relative
+    /// to `intersection_cost`) give shallower trees with fuller leaves: fewer
+    /// node visits, more triangle tests. pbrt-v3: 1; Wald & Havran 2006: 15.
+    pub traversal_cost: f32,
+    /// `K_I`, the cost of one ray/triangle test. Higher values (relative to
+    /// `traversal_cost`) split more eagerly: deeper trees, smaller leaves, more
+    /// references per triangle and more memory. pbrt-v3: 80; Wald & Havran 2006: 20.
+    pub intersection_cost: f32,
+    /// Fraction `b` in `[0, 1)` taken off the intersection part of the cost when
+    /// one side of a split holds no triangle: favours cutting off empty space,
+    /// which rays then skip for one node visit. Larger values carve more empty
+    /// leaves (more nodes). pbrt-v3: 0.5; Wald & Havran 2006: 0.2 (`λ = 0.8`).
+    pub empty_bonus: f32,
+    /// Deepest leaf (root = depth 0). `None` = pbrt-v3's `round(8 + 1.3 · ⌊log2 N⌋)`
+    /// for `N` triangles. Either way capped at [`MAX_TREE_DEPTH`], which sizes the
+    /// GPU traversal stack. A deeper limit lets the SAH isolate small details in
+    /// dense regions; a shallower one bounds memory and the build time when
+    /// triangles overlap heavily (every split then duplicates references).
+    pub max_depth: Option<u32>,
+    /// A node with at most this many triangles becomes a leaf without trying to
+    /// split it. pbrt-v3: 1 (leave termination to the SAH); larger values build
+    /// faster, smaller trees with fuller leaves. Wald & Havran 2006 have no such
+    /// rule (cost-based termination only).
+    pub max_leaf_prims: u32,
+}
+
+impl BuildConfig {
+    /// pbrt-v3's parameters (`KdTreeAccel`): `K_I = 80, K_T = 1, b = 0.5`, one triangle per leaf.
+    pub const PBRT_V3: BuildConfig = BuildConfig {
+        traversal_cost: 1.0,
+        intersection_cost: 80.0,
+        empty_bonus: 0.5,
+        max_depth: None,
+        max_leaf_prims: 1,
+    };
+
+    /// Wald & Havran 2006's costs: `K_T = 15, K_I = 20, λ = 0.8` (`b = 0.2`).
+    pub const WALD_HAVRAN: BuildConfig = BuildConfig {
+        traversal_cost: 15.0,
+        intersection_cost: 20.0,
+        empty_bonus: 0.2,
+        max_depth: None,
+        max_leaf_prims: 1,
+    };
+
+    /// The depth limit for `triangles` triangles: `max_depth`, or pbrt-v3's
+    /// `round(8 + 1.3 · ⌊log2 N⌋)`, never more than [`MAX_TREE_DEPTH`].
+    pub fn depth_limit(&self, triangles: usize) -> u32 {
+        let auto = || {
+            let log2 = if triangles > 1 { triangles.ilog2() } else { 0 };
+            (8.0 + 1.3 * log2 as f64).round() as u32
+        };
+        self.max_depth.unwrap_or_else(auto).min(MAX_TREE_DEPTH)
+    }
+}
+
+impl Default for BuildConfig {
+    /// pbrt-v3's parameters ([`BuildConfig::PBRT_V3`]).
+    fn default() -> Self {
+        BuildConfig::PBRT_V3
+    }
+}
+
+/// pbrt-v3's "bad refines": a path of the tree may take this many splits whose
+/// cost exceeds the leaf cost (in the hope that a later split pays off) before
+/// the builder gives up and makes a leaf.
+pub const MAX_BAD_REFINES: u32 = 3;
+
+/// A kd-tree over a triangle list, ready for upload.
+#[derive(Clone, Debug)]
+pub struct KdTree {
+    /// Nodes in depth-first order; `nodes[0]` is the root.
+    pub nodes: Vec<KdNode>,
+    /// Triangle indices (into the `triangles` slice given to [`KdTree::build`])
+    /// referenced by the leaves; a triangle may appear in several leaves.
+    pub prim_indices: Vec<u32>,
+    /// The box of all triangles in the tree ([`Aabb::EMPTY`] when there are none).
+    pub bounds: Aabb,
+    /// Statistics of the tree and its build.
+    pub stats: BuildStats,
+}
+
+/// True when a triangle has a non-finite coordinate.
+pub fn is_non_finite(tri: &[Vec3; 3]) -> bool {
+    !tri.iter().all(|v| v.is_finite())
+}
+
+/// True when a (finite) triangle has zero area: two equal vertices or three
+/// collinear ones. The cross product of the edges is evaluated in f64, where the
+/// products of f32 differences are exact, so the answer is exact for all but
+/// extreme exponent ranges. In exact arithmetic the edge functions of such a
+/// triangle sum to zero for every ray, so the watertight test (Woop, Benthin &
+/// Wald 2013) and the f64 reference never report a hit on it.
+pub fn is_zero_area(tri: &[Vec3; 3]) -> bool {
+    let [a, b, c] = tri.map(|v| v.as_dvec3());
+    (b - a).cross(c - a) == glam::DVec3::ZERO
+}
+
+/// True when the builder leaves the triangle out: a non-finite coordinate (the
+/// scene loader rejects those; this is a safety net) or zero area (never hit).
+pub fn is_skipped(tri: &[Vec3; 3]) -> bool {
+    is_non_finite(tri) || is_zero_area(tri)
+}
+
+/// A triangle's bounding box, with -0.0 turned into +0.0 so that positions
+/// compare and sort alike.
+fn triangle_box(tri: &[Vec3; 3]) -> Aabb {
+    let b = Aabb::from_points(tri);
+    Aabb::new(b.min + Vec3::ZERO, b.max + Vec3::ZERO)
+}
+
+// Sweep events, in the order Wald & Havran 2006 sweep them at one position:
+// ends (`-`), planar (`|`), starts (`+`).
+const EVENT_END: u64 = 0;
+const EVENT_PLANAR: u64 = 1;
+const EVENT_START: u64 = 2;
+
+/// An event as one sortable integer: the f32 position mapped to an unsigned
+/// key with the same order (sign-magnitude to offset binary), then the type.
+fn event_key(pos: f32, kind: u64) -> u64 {
+    let bits = pos.to_bits();
+    let ordered = if bits >> 31 == 1 { !bits } else { bits | (1 << 31) };
+    ((ordered as u64) << 2) | kind
+}
+
+fn event_pos(key: u64) -> f32 {
+    let ordered = (key >> 2) as u32;
+    let bits = if ordered >> 31 == 1 { ordered & !(1 << 31) } else { !ordered };
+    f32::from_bits(bits)
+}
+
+/// The cheapest split plane of a node.
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    axis: usize,
+    pos: f32,
+    cost: f64,
+    below: usize,
+    above: usize,
+}
+
+/// A node still to be built. `parent` is the interior node whose above child
+/// this is (the below child needs no patch: it is the next node).
+struct Work {
+    prims: Vec<u32>,
+    bounds: Aabb,
+    depth: u32,
+    bad_refines: u32,
+    parent: Option<usize>,
+}
+
+struct Builder<'a> {
+    boxes: &'a [Aabb],
+    config: &'a BuildConfig,
+    max_depth: u32,
+    /// Scratch buffer for the events of one axis, reused across nodes.
+    events: Vec<u64>,
+}
+
+impl Builder<'_> {
+    /// The split of least SAH cost over all three axes, or `None` when no plane
+    /// lies strictly inside the node box (all candidates on its faces).
+    /// Evaluating all axes subsumes pbrt-v3's "retry the other axes".
+    ///
+    /// Triangles touching the plane follow pbrt-v3: box min < split → below,
+    /// box max > split → above. A triangle lying in the plane (box min = max =
+    /// split) goes below, always. The traversal visits both children whenever
+    /// the plane lies inside the ray's interval, which is the only case in which
+    /// the ray can cross such a triangle inside this node, so either side would
+    /// be found; one fixed side keeps the rule simple and the counts exact.
+    fn find_split(&mut self, prims: &[u32], node: &Aabb) -> Option<Split> {
+        let area = node.area() as f64;
+        // Finite boxes: never NaN.
+        if area <= 0.0 {
+            return None;
+        }
+        let inv_area = 1.0 / area;
+        let k_t = self.config.traversal_cost as f64;
+        let k_i = self.config.intersection_cost as f64;
+        let bonus = self.config.empty_bonus as f64;
+        let n = prims.len();
+        let extent = node.extent().as_dvec3();
+        let mut best: Option<Split> = None;
+        for axis in 0..3 {
+            let (lo_node, hi_node) = (node.min[axis], node.max[axis]);
+            if lo_node >= hi_node {
+                continue;
+            }
+            self.events.clear();
+            for &p in prims {
+                let b = &self.boxes[p as usize];
+                let lo = b.min[axis].max(lo_node);
+                let hi = b.max[axis].min(hi_node);
+                if lo == hi {
+                    self.events.push(event_key(lo, EVENT_PLANAR));
+                } else {
+                    self.events.push(event_key(lo, EVENT_START));
+                    self.events.push(event_key(hi, EVENT_END));
+                }
+            }
+            self.events.sort_unstable();
+            // The other two extents: a child's area is 2·(e1·e2 + w·(e1 + e2))
+            // for its width w along `axis`.
+            let (e1, e2) = (extent[(axis + 1) % 3], extent[(axis + 2) % 3]);
+            let cap = e1 * e2;
+            let rim = e1 + e2;
+            let (mut n_below, mut n_above) = (0usize, n);
+            let mut i = 0;
+            while i < self.events.len() {
+                let plane = self.events[i] >> 2;
+                let mut counts = [0usize; 3];
+                while i < self.events.len() && self.events[i] >> 2 == plane {
+                    counts[(self.events[i] & 3) as usize] += 1;
+                    i += 1;
+                }
+                let [ends, planar, starts] = counts;
+                let pos = event_pos(plane << 2);
+                // Boxes ending here or lying here are not above the plane.
+                n_above -= ends + planar;
+                if pos > lo_node && pos < hi_node {
+                    // Planar triangles at the plane go below.
+                    let below = n_below + planar;
+                    let w_below = (pos - lo_node) as f64;
+                    let w_above = (hi_node - pos) as f64;
+                    let p_below = 2.0 * (cap + w_below * rim) * inv_area;
+                    let p_above = 2.0 * (cap + w_above * rim) * inv_area;
+                    let b = if below == 0 || n_above == 0 { bonus } else { 0.0 };
+                    let cost = k_t + k_i * (1.0 - b) * (p_below * below as f64 + p_above * n_above as f64);
+                    if best.map_or(true, |s| cost < s.cost) {
+                        best = Some(Split { axis, pos, cost, below, above: n_above });
+                    }
+                }
+                n_below += planar + starts;
+            }
+        }
+        best
+    }
+}
+
+impl KdTree {
+    /// Builds a kd-tree over `triangles` with the SAH (see the module docs).
+    ///
+    /// Triangles with a non-finite coordinate or zero area ([`is_skipped`]) are
+    /// left out of the tree: no leaf references them, and they do not count in
+    /// `bounds`. If no triangle is left, the tree is a single empty leaf with
+    /// empty bounds (the tracer refuses such a scene itself).
+    ///
+    /// The build is deterministic, iterative (an explicit stack, so no recursion
+    /// however large the input), and never creates a leaf deeper than
+    /// [`BuildConfig::depth_limit`]. Within a leaf, indices are ascending.
+    ///
+    /// # Panics
+    /// If `triangles` has `PRIM_INCOMPLETE` (2³² − 3) or more entries, or the tree
+    /// outgrows the node's 30-bit child field.
+    pub fn build(triangles: &[[Vec3; 3]], config: &BuildConfig) -> KdTree {
+        let start = Instant::now();
+        assert!(
+            triangles.len() < PRIM_INCOMPLETE as usize,
+            "{} triangles: primitive ids must stay below {PRIM_INCOMPLETE:#x}",
+            triangles.len()
+        );
+        let boxes: Vec<Aabb> = triangles.iter().map(triangle_box).collect();
+        let included: Vec<u32> = (0..triangles.len() as u32).filter(|&i| !is_skipped(&triangles[i as usize])).collect();
+        let bounds = included.iter().fold(Aabb::EMPTY, |b, &i| b.union(boxes[i as usize]));
+        let included_count = included.len();
+        let max_depth = config.depth_limit(included_count);
+
+        let mut nodes: Vec<KdNode> = Vec::new();
+        let mut prim_indices: Vec<u32> = Vec::new();
+        let mut builder = Builder { boxes: &boxes, config, max_depth, events: Vec::new() };
+        let mut stack = vec![Work { prims: included, bounds, depth: 0, bad_refines: 0, parent: None }];
+        while let Some(work) = stack.pop() {
+            let index = nodes.len();
+            if let Some(parent) = work.parent {
+                assert!(index <= MAX_NODE_FIELD as usize, "kd-tree too large: more than {MAX_NODE_FIELD} nodes");
+                let p = nodes[parent];
+                nodes[parent] = KdNode::interior(p.axis(), p.split(), index as u32);
+            }
+            match builder.decide(&work) {
+                None => {
+                    let offset = u32::try_from(prim_indices.len()).expect("more than 2^32 primitive references");
+                    nodes.push(KdNode::leaf(offset, work.prims.len() as u32));
+                    prim_indices.extend_from_slice(&work.prims);
+                }
+                Some((split, bad_refines)) => {
+                    let (axis, pos) = (split.axis, split.pos);
+                    let mut below = Vec::with_capacity(split.below);
+                    let mut above = Vec::with_capacity(split.above);
+                    for &p in &work.prims {
+                        let b = &boxes[p as usize];
+                        let (lo, hi) = (b.min[axis], b.max[axis]);
+                        if lo < pos || (lo == pos && hi == pos) {
+                            below.push(p);
+                        }
+                        if hi > pos {
+                            above.push(p);
+                        }
+                    }
+                    debug_assert_eq!((below.len(), above.len()), (split.below, split.above));
+                    let mut below_box = work.bounds;
+                    below_box.max[axis] = pos;
+                    let mut above_box = work.bounds;
+                    above_box.min[axis] = pos;
+                    nodes.push(KdNode::interior(axis, pos, 0));
+                    drop(work.prims);
+                    let depth = work.depth + 1;
+                    // Pushed first, popped last: the below subtree follows its parent.
+                    stack.push(Work { prims: above, bounds: above_box, depth, bad_refines, parent: Some(index) });
+                    stack.push(Work { prims: below, bounds: below_box, depth, bad_refines, parent: None });
+                }
+            }
+        }
+        let build_seconds = start.elapsed().as_secs_f64();
+        let mut tree = KdTree { nodes, prim_indices, bounds, stats: BuildStats::default() };
+        tree.stats =
+            BuildStats::compute(&tree, config, included_count, triangles.len() - included_count, build_seconds);
+        tree
+    }
+
+    /// Visits every node in depth-first order (the order of `nodes`) with its
+    /// index, its box (recomputed from the splits, starting at `bounds`) and its
+    /// depth (root = 0). Iterative; expects a well-formed tree ([`KdTree::check`]).
+    pub fn for_each_node(&self, mut f: impl FnMut(u32, &KdNode, Aabb, u32)) {
+        let mut stack = vec![(0u32, self.bounds, 0u32)];
+        while let Some((index, bounds, depth)) = stack.pop() {
+            let node = &self.nodes[index as usize];
+            f(index, node, bounds, depth);
+            if !node.is_leaf() {
+                let (axis, split) = (node.axis(), node.split());
+                let mut below = bounds;
+                below.max[axis] = split;
+                let mut above = bounds;
+                above.min[axis] = split;
+                stack.push((node.above_child(), above, depth + 1));
+                stack.push((index + 1, below, depth + 1));
+            }
+        }
+    }
+
+    /// Visits every leaf in depth-first order with its node index, the node, its
+    /// recomputed box and its depth (see [`KdTree::for_each_node`]).
+    pub fn for_each_leaf(&self, mut f: impl FnMut(u32, &KdNode, Aabb, u32)) {
+        self.for_each_node(|index, node, bounds, depth| {
+            if node.is_leaf() {
+                f(index, node, bounds, depth)
+            }
+        });
+    }
+
+    /// The primitive indices of a leaf node.
+    pub fn leaf_prims(&self, leaf: &KdNode) -> &[u32] {
+        let offset = leaf.prim_offset() as usize;
+        &self.prim_indices[offset..offset + leaf.prim_count() as usize]
+    }
+
+    /// Checks the structure a traversal relies on, for `triangle_count`
+    /// triangles: every interior node's below child is the next node and its
+    /// above child lies further on; every node is reached exactly once from the
+    /// root; leaves stay within `prim_indices` and reference valid triangles;
+    /// no leaf is deeper than [`MAX_TREE_DEPTH`]; split positions are finite.
+    pub fn check(&self, triangle_count: usize) -> Result<(), String> {
+        if self.nodes.is_empty() {
+            return Err("no nodes".into());
+        }
+        let mut seen = vec![false; self.nodes.len()];
+        let mut stack = vec![(0usize, 0u32)];
+        while let Some((index, depth)) = stack.pop() {
+            let Some(node) = self.nodes.get(index) else {
+                return Err(format!("child index {index} out of range ({} nodes)", self.nodes.len()));
+            };
+            if std::mem::replace(&mut seen[index], true) {
+                return Err(format!("node {index} reached twice"));
+            }
+            if depth > MAX_TREE_DEPTH {
+                return Err(format!("node {index} at depth {depth} > {MAX_TREE_DEPTH}"));
+            }
+            if node.is_leaf() {
+                let (offset, count) = (node.prim_offset() as usize, node.prim_count() as usize);
+                let Some(prims) = self.prim_indices.get(offset..offset + count) else {
+                    return Err(format!("leaf {index}: prims {offset}..{} out of range", offset + count));
+                };
+                if let Some(p) = prims.iter().find(|&&p| p as usize >= triangle_count) {
+                    return Err(format!("leaf {index}: triangle {p} out of range ({triangle_count})"));
+                }
+            } else {
+                let above = node.above_child() as usize;
+                if above <= index + 1 {
+                    return Err(format!("node {index}: above child {above} not after the below child"));
+                }
+                if !node.split().is_finite() {
+                    return Err(format!("node {index}: split {}", node.split()));
+                }
+                stack.push((above, depth + 1));
+                stack.push((index + 1, depth + 1));
+            }
+        }
+        match seen.iter().position(|s| !s) {
+            Some(i) => Err(format!("node {i} unreachable")),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Builder<'_> {
+    /// pbrt-v3's decision for one node: `None` makes a leaf, otherwise the split
+    /// and the bad-refine count its children inherit. A leaf when the node holds
+    /// at most `max_leaf_prims` triangles, at the depth limit, when no plane lies
+    /// inside the node, when the best split costs more than four times the leaf
+    /// cost `K_I · n` while `n < 16`, or at the [`MAX_BAD_REFINES`]th split that
+    /// costs more than the leaf.
+    fn decide(&mut self, work: &Work) -> Option<(Split, u32)> {
+        let n = work.prims.len();
+        if n <= self.config.max_leaf_prims as usize || work.depth >= self.max_depth {
+            return None;
+        }
+        let split = self.find_split(&work.prims, &work.bounds)?;
+        let leaf_cost = self.config.intersection_cost as f64 * n as f64;
+        let mut bad_refines = work.bad_refines;
+        if split.cost > leaf_cost {
+            bad_refines += 1;
+        }
+        if (split.cost > 4.0 * leaf_cost && n < 16) || bad_refines >= MAX_BAD_REFINES {
+            return None;
+        }
+        Some((split, bad_refines))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::consts::PRIM_MISS;
+    use crate::geom::{Hit, Ray, WatertightRay};
+    use crate::reference::{agrees, Agreement};
+
+    /// xorshift64* (Vigna 2016): a tiny deterministic generator for the tests.
+    struct Rng(u64);
+
+    impl Rng {
+        fn new(seed: u64) -> Rng {
+            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        }
+        fn next_u64(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+        /// Uniform in [0, 1).
+        fn f32(&mut self) -> f32 {
+            (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn range(&mut self, lo: f32, hi: f32) -> f32 {
+            lo + (hi - lo) * self.f32()
+        }
+        fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
+            Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
+        }
+        fn below(&mut self, n: usize) -> usize {
+            (self.next_u64() % n as u64) as usize
+        }
+    }
+
+    /// `n` triangles in the unit cube, of sizes from tiny up to `size`.
+    fn soup(seed: u64, n: usize, size: f32) -> Vec<[Vec3; 3]> {
+        let mut rng = Rng::new(seed);
+        (0..n)
+            .map(|_| {
+                let c = rng.vec3(0.0, 1.0);
+                let s = size * rng.f32() * rng.f32() + 1e-4;
+                [c + rng.vec3(-s, s), c + rng.vec3(-s, s), c + rng.vec3(-s, s)]
+            })
+            .collect()
+    }
+
+    /// A minimal OBJ reader (`v` and `f`, fanned n-gons, negative indices), so
+    /// these tests need not wait for the scene loader.
+    fn read_obj(path: &str) -> Vec<[Vec3; 3]> {
+        let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        let mut verts = Vec::new();
+        let mut tris = Vec::new();
+        for line in text.lines() {
+            let mut words = line.split_whitespace();
+            match words.next() {
+                Some("v") => {
+                    let c: Vec<f32> = words.take(3).map(|w| w.parse().unwrap()).collect();
+                    verts.push(Vec3::new(c[0], c[1], c[2]));
+                }
+                Some("f") => {
+                    let idx: Vec<usize> = words
+                        .map(|w| {
+                            let i: i64 = w.split('/').next().unwrap().parse().unwrap();
+                            if i < 0 {
+                                (verts.len() as i64 + i) as usize
+                            } else {
+                                i as usize - 1
+                            }
+                        })
+                        .collect();
+                    for k in 1..idx.len() - 1 {
+                        tris.push([verts[idx[0]], verts[idx[k]], verts[idx[k + 1]]]);
+                    }
+                }
+                _ => {}
+            }
+        }
+        tris
+    }
+
+    fn teapot() -> Vec<[Vec3; 3]> {
+        read_obj(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/teapot.obj"))
+    }
+
+    /// Every invariant the traversals and the GPU rely on.
+    fn check_tree(tris: &[[Vec3; 3]], tree: &KdTree, config: &BuildConfig) {
+        tree.check(tris.len()).unwrap();
+        let included: Vec<usize> = (0..tris.len()).filter(|&i| !is_skipped(&tris[i])).collect();
+        let limit = config.depth_limit(included.len());
+        assert!(limit <= MAX_TREE_DEPTH);
+        let bounds = included.iter().fold(Aabb::EMPTY, |b, &i| b.union(triangle_box(&tris[i])));
+        assert_eq!(tree.bounds, bounds);
+        if included.is_empty() {
+            assert_eq!(tree.nodes, vec![KdNode::leaf(0, 0)]);
+            assert!(tree.prim_indices.is_empty() && tree.bounds.is_empty());
+        }
+        // Depth-first order: a preorder walk meets the nodes in index order, and
+        // below = index + 1 < above.
+        let mut order = Vec::new();
+        tree.for_each_node(|i, node, _, _| {
+            order.push(i);
+            if !node.is_leaf() {
+                assert!(node.above_child() > i + 1 && (node.above_child() as usize) < tree.nodes.len());
+            }
+        });
+        assert_eq!(order, (0..tree.nodes.len() as u32).collect::<Vec<_>>());
+        let mut referenced = vec![false; tris.len()];
+        let mut refs = 0;
+        tree.for_each_leaf(|i, node, b, depth| {
+            assert!(depth <= limit, "leaf {i} at depth {depth} > {limit}");
+            if !included.is_empty() {
+                assert!(!b.is_empty() && tree.bounds.contains_box(&b), "leaf {i}: {b:?} outside {:?}", tree.bounds);
+            }
+            for &p in tree.leaf_prims(node) {
+                let tri = &tris[p as usize];
+                assert!(!is_skipped(tri), "skipped triangle {p} in leaf {i}");
+                assert!(triangle_box(tri).overlaps(&b), "triangle {p} does not touch leaf {i}");
+                referenced[p as usize] = true;
+            }
+            refs += node.prim_count() as usize;
+        });
+        assert_eq!(refs, tree.prim_indices.len());
+        for &i in &included {
+            assert!(referenced[i], "triangle {i} in no leaf");
+        }
+        let s = &tree.stats;
+        assert_eq!(
+            (s.nodes, s.triangles, s.skipped_triangles),
+            (tree.nodes.len(), included.len(), tris.len() - included.len())
+        );
+        assert_eq!(s.leaves, tree.nodes.iter().filter(|n| n.is_leaf()).count());
+        assert!(s.max_depth <= limit && s.depth_limit == limit);
+        assert!(s.sah_cost.is_finite() && s.sah_cost >= 0.0);
+        if !included.is_empty() {
+            assert!(s.refs_per_triangle >= 1.0);
+        }
+    }
+
+    /// A small pbrt-style front-to-back stack traversal, written independently of
+    /// `traverse.rs`, using the watertight test. Returns the closest hit.
+    fn trace(tree: &KdTree, tris: &[[Vec3; 3]], ray: &Ray) -> Hit {
+        let (o, d) = (Vec3::from(ray.origin), Vec3::from(ray.dir));
+        let b = tree.bounds;
+        let (mut t0, mut t1) = (ray.tmin, ray.tmax);
+        for a in 0..3 {
+            if d[a] == 0.0 {
+                if o[a] < b.min[a] || o[a] > b.max[a] {
+                    return Hit::MISS;
+                }
+                continue;
+            }
+            let (mut near, mut far) = ((b.min[a] - o[a]) / d[a], (b.max[a] - o[a]) / d[a]);
+            if near > far {
+                std::mem::swap(&mut near, &mut far);
+            }
+            // pbrt's 1 + 2·gamma(3): rounding never clips a hit on the box away.
+            far *= 1.0 + 6.0 * f32::EPSILON;
+            t0 = t0.max(near);
+            t1 = t1.min(far);
+        }
+        if t0 > t1 {
+            return Hit::MISS;
+        }
+        let wr = WatertightRay::new(o, d);
+        let mut best = Hit::MISS;
+        let mut best_t = ray.tmax;
+        let mut stack: Vec<(u32, f32, f32)> = Vec::new();
+        let mut index = 0u32;
+        loop {
+            let node = tree.nodes[index as usize];
+            if !node.is_leaf() {
+                let (a, split) = (node.axis(), node.split());
+                let (below, above) = (index + 1, node.above_child());
+                if d[a] == 0.0 {
+                    index = if o[a] < split {
+                        below
+                    } else if o[a] > split {
+                        above
+                    } else {
+                        stack.push((above, t0, t1));
+                        below
+                    };
+                } else {
+                    let ts = (split - o[a]) / d[a];
+                    let (near, far) = if d[a] > 0.0 { (below, above) } else { (above, below) };
+                    if ts > t1 {
+                        index = near;
+                    } else if ts < t0 {
+                        index = far;
+                    } else {
+                        stack.push((far, ts, t1));
+                        index = near;
+                        t1 = ts;
+                    }
+                }
+                assert!(stack.len() <= MAX_TREE_DEPTH as usize);
+                continue;
+            }
+            for &p in tree.leaf_prims(&node) {
+                let [v0, v1, v2] = tris[p as usize];
+                if let Some((t, u, v)) = wr.intersect(v0, v1, v2, ray.tmin, best_t) {
+                    best = Hit { t, prim_id: p, u, v };
+                    best_t = t;
+                }
+            }
+            if best_t <= t1 {
+                break;
+            }
+            match stack.pop() {
+                Some((i, a, b)) => (index, t0, t1) = (i, a, b),
+                None => break,
+            }
+        }
+        best
+    }
+
+    /// Random rays at a scene: aimed at points on triangles, at random points of
+    /// the box, axis-parallel ones, origins on split planes, bounded segments.
+    fn random_rays(seed: u64, tris: &[[Vec3; 3]], tree: &KdTree, count: usize) -> Vec<Ray> {
+        let mut rng = Rng::new(seed);
+        let b = tree.bounds;
+        let (center, size) = (b.center(), b.extent().max_element().max(1e-3));
+        let splits: Vec<(usize, f32)> =
+            tree.nodes.iter().filter(|n| !n.is_leaf()).map(|n| (n.axis(), n.split())).collect();
+        (0..count)
+            .map(|k| {
+                let mut origin = center + rng.vec3(-1.0, 1.0) * size;
+                let target = if k % 2 == 0 {
+                    let [v0, v1, v2] = tris[rng.below(tris.len())];
+                    let (mut u, mut v) = (rng.f32(), rng.f32());
+                    if u + v > 1.0 {
+                        (u, v) = (1.0 - u, 1.0 - v);
+                    }
+                    v0 + u * (v1 - v0) + v * (v2 - v0)
+                } else {
+                    b.min + rng.vec3(0.0, 1.0) * b.extent()
+                };
+                let mut dir = target - origin;
+                let (mut tmin, mut tmax) = (0.0, f32::INFINITY);
+                match k % 10 {
+                    1 if !splits.is_empty() => {
+                        let (axis, split) = splits[rng.below(splits.len())];
+                        origin[axis] = split;
+                        dir = target - origin;
+                    }
+                    3 => dir[rng.below(3)] = 0.0,
+                    5 => {
+                        let keep = rng.below(3);
+                        dir = Vec3::select(glam::BVec3::new(keep == 0, keep == 1, keep == 2), dir, Vec3::ZERO);
+                        dir[keep] = if dir[keep] == 0.0 { 1.0 } else { dir[keep] };
+                    }
+                    7 => {
+                        tmin = rng.range(0.0, 0.9);
+                        tmax = rng.range(tmin, 1.5);
+                    }
+                    9 => dir = -dir,
+                    _ => {}
+                }
+                if dir == Vec3::ZERO {
+                    dir = Vec3::X;
+                }
+                if k % 4 == 0 {
+                    dir = dir.normalize();
+                    tmax *= 1.0;
+                }
+                Ray::new(origin, dir, tmin, tmax)
+            })
+            .collect()
+    }
+
+    /// Traces `count` random rays with the test traversal and compares each with
+    /// the f64 brute force. Returns (hits, grazing).
+    fn compare_with_reference(name: &str, tris: &[[Vec3; 3]], config: &BuildConfig, count: usize) -> (usize, usize) {
+        let tree = KdTree::build(tris, config);
+        check_tree(tris, &tree, config);
+        let rays = random_rays(0xC0FFEE ^ tris.len() as u64, tris, &tree, count);
+        let (mut hits, mut grazing, mut ties) = (0, 0, 0);
+        for (i, ray) in rays.iter().enumerate() {
+            let hit = trace(&tree, tris, ray);
+            match agrees(tris, ray, &hit) {
+                Agreement::Disagree(why) => panic!("{name}: ray {i}: {why}"),
+                Agreement::Grazing => {
+                    grazing += 1;
+                    if std::env::var_os("KDTRACE_TEST_VERBOSE").is_some() {
+                        let reference = crate::reference::closest_hit_f64(tris, ray);
+                        eprintln!("{name}: ray {i} grazing: {ray:?} tracer {hit:?} reference {reference:?}");
+                    }
+                }
+                Agreement::Tie => ties += 1,
+                _ => {}
+            }
+            hits += (hit.prim_id != PRIM_MISS) as usize;
+        }
+        eprintln!("{name}: {count} rays, {hits} hits, {ties} ties, {grazing} grazing; {}", tree.stats);
+        // Far from the origin, f32 snaps many aimed rays exactly onto vertices.
+        let allowed_percent = if name.contains("far") { 5 } else { 1 };
+        assert!(grazing * 100 <= count * allowed_percent, "{name}: {grazing} grazing rays");
+        (hits, grazing)
+    }
+
+    #[test]
+    fn node_encoding_round_trip() {
+        for (axis, split, above) in
+            [(0, 0.0, 2), (1, -0.0, 7), (2, -1.5e-30, MAX_NODE_FIELD), (0, 3.4e38, 123_456), (1, f32::MIN_POSITIVE, 5)]
+        {
+            let n = KdNode::interior(axis, split, above);
+            assert!(!n.is_leaf());
+            assert_eq!((n.axis(), n.split().to_bits(), n.above_child()), (axis, split.to_bits(), above));
+        }
+        for (offset, count) in [(0, 0), (5, 1), (u32::MAX, MAX_NODE_FIELD), (17, 1000)] {
+            let n = KdNode::leaf(offset, count);
+            assert!(n.is_leaf());
+            assert_eq!((n.prim_offset(), n.prim_count()), (offset, count));
+        }
+        assert_eq!(std::mem::size_of::<KdNode>(), 8);
+    }
+
+    #[test]
+    fn event_keys_sort_like_positions() {
+        let mut values = vec![-3.0f32, -1e-30, 0.0, 1e-30, 2.5, 1e30, -1e30, f32::MIN_POSITIVE];
+        let mut keys: Vec<u64> = values.iter().map(|&v| event_key(v, EVENT_PLANAR)).collect();
+        keys.sort_unstable();
+        values.sort_by(f32::total_cmp);
+        assert_eq!(keys.iter().map(|&k| event_pos(k)).collect::<Vec<_>>(), values);
+        assert!(event_key(1.0, EVENT_END) < event_key(1.0, EVENT_PLANAR));
+        assert!(event_key(1.0, EVENT_PLANAR) < event_key(1.0, EVENT_START));
+    }
+
+    #[test]
+    fn depth_limit() {
+        let c = BuildConfig::default();
+        assert_eq!(c.depth_limit(0), 8);
+        assert_eq!(c.depth_limit(1), 8);
+        assert_eq!(c.depth_limit(1024), 21);
+        assert_eq!(c.depth_limit(1 << 20), 34);
+        assert_eq!(c.depth_limit(usize::MAX), MAX_TREE_DEPTH);
+        assert_eq!(BuildConfig { max_depth: Some(100), ..c }.depth_limit(5), MAX_TREE_DEPTH);
+        assert_eq!(BuildConfig { max_depth: Some(3), ..c }.depth_limit(1 << 20), 3);
+    }
+
+    #[test]
+    fn random_soups_build_valid_trees() {
+        let configs = [
+            BuildConfig::PBRT_V3,
+            BuildConfig::WALD_HAVRAN,
+            BuildConfig { max_depth: Some(3), ..BuildConfig::PBRT_V3 },
+            BuildConfig { max_leaf_prims: 8, ..BuildConfig::PBRT_V3 },
+            BuildConfig { empty_bonus: 0.0, traversal_cost: 0.0, ..BuildConfig::PBRT_V3 },
+        ];
+        for seed in 0..6 {
+            let tris =
+                soup(seed, [1, 2, 10, 100, 1000, 3000][seed as usize], [0.5, 0.3, 0.2, 0.2, 0.05, 0.02][seed as usize]);
+            for config in &configs {
+                let tree = KdTree::build(&tris, config);
+                check_tree(&tris, &tree, config);
+            }
+        }
+    }
+
+    #[test]
+    fn deterministic() {
+        let tris = soup(7, 2000, 0.1);
+        let (a, b) = (KdTree::build(&tris, &BuildConfig::default()), KdTree::build(&tris, &BuildConfig::default()));
+        assert_eq!((a.nodes, a.prim_indices, a.bounds), (b.nodes, b.prim_indices, b.bounds));
+    }
+
+    /// The structured inputs of the field's pitfalls.
+    fn structured() -> Vec<(&'static str, Vec<[Vec3; 3]>)> {
+        let mut rng = Rng::new(99);
+        let mut cases = Vec::new();
+        cases.push(("empty", Vec::new()));
+        cases.push(("one triangle", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]]));
+        let axis_plane = (0..500)
+            .map(|_| {
+                let c = rng.vec3(0.0, 1.0);
+                let p = |rng: &mut Rng| Vec3::new(c.x + rng.range(-0.1, 0.1), 0.25, c.z + rng.range(-0.1, 0.1));
+                [p(&mut rng), p(&mut rng), p(&mut rng)]
+            })
+            .collect();
+        cases.push(("coplanar in y = 0.25", axis_plane));
+        let (n, d) = (Vec3::new(1.0, 2.0, 3.0).normalize(), 0.3);
+        let tilted = (0..500)
+            .map(|_| {
+                let c = rng.vec3(0.0, 1.0);
+                let c = c - (c.dot(n) - d) * n;
+                let e1 = n.any_orthonormal_vector();
+                let e2 = n.cross(e1);
+                let mut p = || c + rng.range(-0.1, 0.1) * e1 + rng.range(-0.1, 0.1) * e2;
+                [p(), p(), p()]
+            })
+            .collect();
+        cases.push(("coplanar tilted", tilted));
+        let t = [Vec3::new(0.1, 0.2, 0.3), Vec3::new(0.9, 0.1, 0.5), Vec3::new(0.4, 0.8, 0.2)];
+        cases.push(("1000 identical", vec![t; 1000]));
+        let needles = (0..1000)
+            .map(|_| {
+                let a = rng.vec3(0.0, 1.0);
+                let b = rng.vec3(0.0, 1.0);
+                [a, b, b + rng.vec3(-1e-4, 1e-4)]
+            })
+            .collect();
+        cases.push(("needles", needles));
+        let mut mixed = soup(5, 300, 0.2);
+        for i in 0..300 {
+            let v = rng.vec3(0.0, 1.0);
+            mixed.insert(i * 2, if i % 2 == 0 { [v, v, v] } else { [v, v + Vec3::X, v + 2.0 * Vec3::X] });
+        }
+        mixed.push([Vec3::new(f32::NAN, 0.0, 0.0), Vec3::X, Vec3::Y]);
+        mixed.push([Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::X, Vec3::Y]);
+        cases.push(("zero-area and non-finite mixed in", mixed));
+        let v = Vec3::new(0.3, -0.0, 0.7);
+        cases.push(("10k at one point", vec![[v, v, v]; 10_000]));
+        let tiny = (0..10_000).map(|_| [v, v + rng.vec3(-1e-6, 1e-6), v + rng.vec3(-1e-6, 1e-6)]).collect();
+        cases.push(("10k tiny at one point", tiny));
+        let mut grid = Vec::new();
+        for i in 0..20 {
+            for j in 0..20 {
+                let (x, y) = (i as f32 * 0.05, j as f32 * 0.05);
+                let p = |dx: f32, dy: f32| Vec3::new(x + dx, y + dy, 0.0);
+                grid.push([p(0.0, 0.0), p(0.05, 0.0), p(0.05, 0.05)]);
+                grid.push([p(0.0, 0.0), p(0.05, 0.05), p(0.0, 0.05)]);
+            }
+        }
+        cases.push(("grid in z = 0", grid));
+        let mut cubes = Vec::new();
+        for i in 0..6 {
+            for j in 0..6 {
+                for k in 0..6 {
+                    let o = Vec3::new(i as f32, j as f32, k as f32) * 0.2;
+                    for axis in 0..3 {
+                        let (u, v) = (Vec3::AXES[(axis + 1) % 3] * 0.1, Vec3::AXES[(axis + 2) % 3] * 0.1);
+                        cubes.push([o, o + u, o + u + v]);
+                        cubes.push([o, o + u + v, o + v]);
+                    }
+                }
+            }
+        }
+        cases.push(("3D grid of axis-aligned quads", cubes));
+        let far: Vec<[Vec3; 3]> = soup(11, 500, 0.1).iter().map(|t| t.map(|v| v * 10.0 + Vec3::splat(1e5))).collect();
+        cases.push(("far from the origin", far));
+        cases
+    }
+
+    #[test]
+    fn structured_inputs_build_valid_trees() {
+        for (name, tris) in structured() {
+            for config in [
+                BuildConfig::PBRT_V3,
+                BuildConfig::WALD_HAVRAN,
+                BuildConfig { max_depth: Some(4), ..BuildConfig::PBRT_V3 },
+            ] {
+                let tree = KdTree::build(&tris, &config);
+                check_tree(&tris, &tree, &config);
+                eprintln!("{name}: {}", tree.stats);
+            }
+        }
+    }
+
+    #[test]
+    fn skipped_triangles() {
+        let v = Vec3::new(0.3, 0.0, 0.7);
+        let tree = KdTree::build(&[[v, v, v]; 100], &BuildConfig::default());
+        assert_eq!(tree.nodes, vec![KdNode::leaf(0, 0)]);
+        assert!(tree.bounds.is_empty() && tree.prim_indices.is_empty());
+        assert_eq!((tree.stats.triangles, tree.stats.skipped_triangles, tree.stats.leaves), (0, 100, 1));
+        assert!(is_zero_area(&[Vec3::ZERO, Vec3::ONE, Vec3::ONE * 3.0]));
+        assert!(!is_zero_area(&[Vec3::ZERO, Vec3::ONE, Vec3::new(1.0, 1.0, 1.000001)]));
+        assert!(is_non_finite(&[Vec3::ZERO, Vec3::ONE, Vec3::new(0.0, f32::NAN, 0.0)]));
+    }
+
+    #[test]
+    fn planar_triangles_at_a_split_go_below() {
+        // Two boxes of triangles either side of a wall of triangles in x = 0.5:
+        // the SAH splits at the wall, which must end up below the split.
+        let mut tris = soup(3, 200, 0.05).iter().map(|t| t.map(|v| v * Vec3::new(0.4, 1.0, 1.0))).collect::<Vec<_>>();
+        tris.extend(soup(4, 200, 0.05).iter().map(|t| t.map(|v| v * Vec3::new(0.4, 1.0, 1.0) + Vec3::X * 0.6)));
+        let wall = tris.len() as u32;
+        tris.push([Vec3::new(0.5, 0.0, 0.0), Vec3::new(0.5, 1.0, 0.0), Vec3::new(0.5, 0.0, 1.0)]);
+        let tree = KdTree::build(&tris, &BuildConfig::default());
+        check_tree(&tris, &tree, &BuildConfig::default());
+        tree.for_each_leaf(|_, node, b, _| {
+            if tree.leaf_prims(node).contains(&wall) {
+                assert!(b.min.x < 0.5 && b.max.x >= 0.5, "{b:?}");
+            }
+        });
+    }
+
+    #[test]
+    fn traversal_matches_reference_on_random_soups() {
+        let mut hits = 0;
+        for (seed, n, size) in [(1u64, 50, 0.5), (2, 400, 0.2), (3, 2000, 0.05)] {
+            let tris = soup(seed, n, size);
+            for config in [BuildConfig::PBRT_V3, BuildConfig::WALD_HAVRAN] {
+                hits += compare_with_reference(&format!("soup {n}"), &tris, &config, 700).0;
+            }
+        }
+        assert!(hits > 2000, "{hits} hits");
+    }
+
+    #[test]
+    fn traversal_matches_reference_on_structured_inputs() {
+        for (name, tris) in structured() {
+            if tris.iter().all(is_skipped) || tris.len() > 5000 {
+                continue;
+            }
+            compare_with_reference(name, &tris, &BuildConfig::default(), 300);
+        }
+    }
+
+    #[test]
+    fn traversal_matches_reference_on_teapot() {
+        let tris = teapot();
+        assert_eq!(tris.len(), 992);
+        let (hits, _) = compare_with_reference("teapot", &tris, &BuildConfig::default(), 2000);
+        assert!(hits > 900, "{hits} hits");
+        compare_with_reference("teapot (Wald-Havran)", &tris, &BuildConfig::WALD_HAVRAN, 500);
+    }
+
+    /// Build times and statistics on the bundled scenes:
+    /// `cargo test --release --lib kdtree::build::tests::scene_stats -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn scene_stats() {
+        let root = env!("CARGO_MANIFEST_DIR");
+        let shared = format!("{root}/../shared/scenes");
+        for name in ["teapot.obj", "q3_20kdm2.obj", "bunny.obj", "dragon_200k.obj"] {
+            let Some(path) = [format!("{root}/scenes/{name}"), format!("{shared}/{name}")]
+                .into_iter()
+                .find(|p| std::path::Path::new(p).exists())
+            else {
+                eprintln!("{name}: not found");
+                continue;
+            };
+            let tris = read_obj(&path);
+            for (label, config) in [("pbrt-v3", BuildConfig::PBRT_V3), ("Wald-Havran", BuildConfig::WALD_HAVRAN)] {
+                let tree = KdTree::build(&tris, &config);
+                eprintln!("{name} [{label}]: {}", tree.stats);
+            }
+        }
+    }
+
+    /// A million triangles: no stack overflow, bounded depth (slow in debug builds).
+    #[test]
+    #[ignore]
+    fn million_triangles() {
+        let tris = soup(42, 1_000_000, 0.01);
+        let config = BuildConfig::default();
+        let tree = KdTree::build(&tris, &config);
+        eprintln!("1M soup: {}", tree.stats);
+        check_tree(&tris, &tree, &config);
+    }
+
+    #[test]
+    fn scratch_traverse_rs() {
+        use crate::kdtree::traverse::{trace_ray, SceneRef, Variant};
+        for (name, tris) in [("teapot", teapot()), ("soup", soup(3, 2000, 0.05))].into_iter().chain(structured()) {
+            if tris.iter().all(is_skipped) { continue; }
+            let tree = KdTree::build(&tris, &BuildConfig::default());
+            let scene = SceneRef { nodes: &tree.nodes, prim_indices: &tree.prim_indices, triangles: &tris, bounds: tree.bounds };
+            let rays = random_rays(5, &tris, &tree, 500);
+            for v in Variant::ALL {
+                let mut bad = 0; let mut graze = 0;
+                for ray in &rays {
+                    let (hit, _) = trace_ray(&scene, ray, v);
+                    match agrees(&tris, ray, &hit) { Agreement::Disagree(w) => { if bad < 2 { eprintln!("{name} {v:?}: {w}"); } bad += 1 }, Agreement::Grazing => graze += 1, _ => {} }
+                }
+                eprintln!("{name} {v:?}: {bad} disagree, {graze} grazing of {}", rays.len());
+            }
+        }
+    }
+}

@@ -1,0 +1,8 @@
+//! The kd-tree: node layout, builder, CPU traversals.
+pub mod node;
+pub use node::KdNode;
+pub mod build;
+pub mod stats;
+pub mod traverse;
+pub use build::{BuildConfig, KdTree};
+pub use stats::BuildStats;

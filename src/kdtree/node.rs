@@ -1,0 +1,59 @@
+//! The 8-byte kd-tree node (pbrt-v3; Hapala & Havran), mirrored by
+//! `glsl/shared/kdnode.glsl`.
+//!
+//! - interior: `word0` = split position (f32 bits); `word1` = axis (0..2, low 2 bits)
+//!   | index of the above child << 2. The below child is the next node (depth-first order).
+//! - leaf: `word1` = 3 | primitive count << 2; `word0` = offset into `prim_indices`.
+
+use bytemuck::{Pod, Zeroable};
+
+/// One kd-tree node, 8 bytes, as uploaded to the GPU.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Pod, Zeroable)]
+pub struct KdNode {
+    pub word0: u32,
+    pub word1: u32,
+}
+
+/// Largest child index or primitive count a node can hold (30 bits).
+pub const MAX_NODE_FIELD: u32 = (1 << 30) - 1;
+
+impl KdNode {
+    /// An interior node splitting `axis` at `split`; `above_child` is the index of
+    /// the child with coordinates `>= split`.
+    pub fn interior(axis: usize, split: f32, above_child: u32) -> Self {
+        debug_assert!(axis < 3 && above_child <= MAX_NODE_FIELD);
+        KdNode { word0: split.to_bits(), word1: axis as u32 | (above_child << 2) }
+    }
+
+    /// A leaf holding `count` primitives at `prim_indices[offset..offset + count]`.
+    pub fn leaf(offset: u32, count: u32) -> Self {
+        debug_assert!(count <= MAX_NODE_FIELD);
+        KdNode { word0: offset, word1: 3 | (count << 2) }
+    }
+
+    pub fn is_leaf(&self) -> bool {
+        self.word1 & 3 == 3
+    }
+
+    /// Split axis of an interior node (0 = x, 1 = y, 2 = z).
+    pub fn axis(&self) -> usize {
+        (self.word1 & 3) as usize
+    }
+
+    pub fn split(&self) -> f32 {
+        f32::from_bits(self.word0)
+    }
+
+    pub fn above_child(&self) -> u32 {
+        self.word1 >> 2
+    }
+
+    pub fn prim_count(&self) -> u32 {
+        self.word1 >> 2
+    }
+
+    pub fn prim_offset(&self) -> u32 {
+        self.word0
+    }
+}

@@ -1,0 +1,14 @@
+//! kdtrace: SAH kd-tree ray tracing on the GPU through Vulkan compute.
+pub mod consts;
+pub mod error;
+pub mod geom;
+pub mod gpu;
+pub mod io;
+pub mod kdtree;
+pub mod reference;
+pub mod render;
+pub mod scene;
+pub mod trace;
+
+pub use error::{Error, Result};
+pub use geom::{Aabb, Hit, Ray};

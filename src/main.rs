@@ -1,0 +1,269 @@
+//! The `kdtrace` command line: a thin layer over the library.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use kdtrace::gpu::{list_devices, ContextOptions, GpuContext};
+use kdtrace::kdtree::traverse::Variant;
+use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::scene::{Camera, Scene};
+use kdtrace::trace::{TraceOptions, Tracer};
+
+#[derive(Parser)]
+#[command(name = "kdtrace", version, about = "SAH kd-tree ray tracing on the GPU through Vulkan compute")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene with primary rays and headlight shading to a PNG.
+    Render(RenderArgs),
+    /// Trace a binary ray file and write a binary hit file.
+    Trace(TraceArgs),
+    /// Build the kd-tree and print its statistics.
+    Stats(StatsArgs),
+    /// List the Vulkan devices and their subgroup properties.
+    Info,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// Output PNG.
+    #[arg(short, long, default_value = "out.png")]
+    output: PathBuf,
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+    /// Camera position x,y,z (default: the scene's entry in cameras.json next to it, else framing the box).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    eye: Option<Vec3>,
+    /// Point looked at, x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    target: Option<Vec3>,
+    /// Up vector x,y,z.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: Option<Vec3>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    fov: Option<f32>,
+    /// Traversal variant: stack | restart.
+    #[arg(long, default_value = "stack")]
+    traversal: String,
+}
+
+#[derive(clap::Args)]
+struct TraceArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// Ray file: 32-byte records ox oy oz tmin dx dy dz tmax (f32, little-endian).
+    rays: PathBuf,
+    /// Hit file to write: 16-byte records t prim_id u v.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Traversal variant: stack | restart.
+    #[arg(long, default_value = "stack")]
+    traversal: String,
+}
+
+#[derive(clap::Args)]
+struct StatsArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
+    let parts: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>().map_err(|e| format!("'{p}': {e}")))
+        .collect::<std::result::Result<_, _>>()?;
+    match parts.as_slice() {
+        [x, y, z] if x.is_finite() && y.is_finite() && z.is_finite() => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!("expected three finite numbers x,y,z, got '{s}'")),
+    }
+}
+
+fn spinner(message: String) -> ProgressBar {
+    let bar = ProgressBar::new_spinner().with_message(message);
+    bar.enable_steady_tick(Duration::from_millis(120));
+    bar
+}
+
+/// Loads the scene and builds its tree, with a spinner while that runs.
+fn load_and_build(path: &Path) -> Result<(Scene, KdTree)> {
+    let bar = spinner(format!("loading {}", path.display()));
+    let scene = Scene::load(path)?;
+    bar.set_message(format!("building kd-tree over {} triangles", scene.triangles.len()));
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    bar.finish_and_clear();
+    Ok((scene, tree))
+}
+
+fn context() -> Result<std::sync::Arc<GpuContext>> {
+    GpuContext::headless(&ContextOptions::from_env()).context("creating the Vulkan device")
+}
+
+fn trace_bar(len: usize) -> ProgressBar {
+    let bar = ProgressBar::new(len as u64);
+    bar.set_style(ProgressStyle::with_template("tracing {bar:40} {pos}/{len} rays {elapsed}").unwrap());
+    bar
+}
+
+fn render(args: RenderArgs) -> Result<()> {
+    if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
+        bail!("--width and --height must be in 1..=16384");
+    }
+    let variant: Variant = args.traversal.parse()?;
+    let (scene, tree) = load_and_build(&args.scene)?;
+    let mut camera = default_camera(&args.scene, &scene)?;
+    if let Some(eye) = args.eye {
+        camera.eye = eye;
+    }
+    if let Some(target) = args.target {
+        camera.target = target;
+    }
+    if let Some(up) = args.up {
+        camera.up = up;
+    }
+    if let Some(fov) = args.fov {
+        if !(fov > 0.0 && fov < 180.0) {
+            bail!("--fov must be in (0, 180) degrees");
+        }
+        camera.fov_deg = fov;
+    }
+    if (camera.target - camera.eye).length_squared() == 0.0 || (camera.target - camera.eye).cross(camera.up) == Vec3::ZERO {
+        bail!("the camera is degenerate: eye equals target, or up is parallel to the view direction");
+    }
+    let ctx = context()?;
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    let rays = kdtrace::render::camera_rays(&camera, args.width, args.height);
+    let bar = trace_bar(rays.len());
+    let result = tracer.trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    bar.finish_and_clear();
+    let colors = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
+    let image = kdtrace::render::to_image(&colors, args.width, args.height);
+    image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
+    let hits = result.hits.iter().filter(|h| h.is_hit()).count();
+    eprint!("{}: {}x{} on {}, {} of {} pixels hit", args.output.display(), args.width, args.height, ctx.info.name, hits, rays.len());
+    if let Some(s) = result.gpu_seconds {
+        eprint!(", trace {:.2} ms ({:.2} M rays/s)", s * 1e3, rays.len() as f64 / s / 1e6);
+    }
+    eprintln!();
+    Ok(())
+}
+
+/// The camera from `cameras.json` beside the scene (keyed by file stem), else one framing the box.
+fn default_camera(path: &Path, scene: &Scene) -> Result<Camera> {
+    let json = path.parent().unwrap_or(Path::new(".")).join("cameras.json");
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    if json.exists() {
+        if let Some(camera) = Camera::from_cameras_json(&json, &stem)? {
+            return Ok(camera);
+        }
+    }
+    Ok(Camera::frame(&scene.bounds))
+}
+
+fn trace(args: TraceArgs) -> Result<()> {
+    let variant: Variant = args.traversal.parse()?;
+    let rays = kdtrace::io::read_rays(&args.rays)?;
+    let (scene, tree) = load_and_build(&args.scene)?;
+    let ctx = context()?;
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    let bar = trace_bar(rays.len());
+    let start = Instant::now();
+    let result = tracer.trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    let wall = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    kdtrace::io::write_hits(&args.output, &result.hits)?;
+    let hits = result.hits.iter().filter(|h| h.is_hit()).count();
+    let invalid = result.hits.iter().filter(|h| h.prim_id == kdtrace::consts::PRIM_INVALID).count();
+    eprintln!("{} rays, {} hits, {} invalid (NaN/zero direction or non-finite origin) on {}", rays.len(), hits, invalid, ctx.info.name);
+    match result.gpu_seconds {
+        Some(s) if s > 0.0 => eprintln!(
+            "traversal ({}): {:.3} ms GPU = {:.2} M rays/s (timestamps, excluding upload; wall incl. transfers {:.3} ms)",
+            variant.name(),
+            s * 1e3,
+            rays.len() as f64 / s / 1e6,
+            wall * 1e3
+        ),
+        _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", variant.name(), wall * 1e3),
+    }
+    Ok(())
+}
+
+fn stats(args: StatsArgs) -> Result<()> {
+    let (scene, tree) = load_and_build(&args.scene)?;
+    let s = &tree.stats;
+    let node_bytes = std::mem::size_of_val(tree.nodes.as_slice());
+    let index_bytes = std::mem::size_of_val(tree.prim_indices.as_slice());
+    if args.json {
+        println!(
+            "{{\"scene\":{:?},\"triangles\":{},\"degenerate\":{},\"nodes\":{},\"leaves\":{},\"empty_leaves\":{},\"max_depth\":{},\"mean_leaf_depth\":{},\"refs_per_triangle\":{},\"mean_prims_per_leaf\":{},\"max_prims_per_leaf\":{},\"sah_cost\":{},\"build_seconds\":{},\"node_bytes\":{},\"index_bytes\":{}}}",
+            args.scene.display().to_string(),
+            scene.triangles.len(),
+            scene.degenerate_count,
+            s.nodes,
+            s.leaves,
+            s.empty_leaves,
+            s.max_depth,
+            s.mean_leaf_depth,
+            s.refs_per_triangle,
+            s.mean_prims_per_leaf,
+            s.max_prims_per_leaf,
+            s.sah_cost,
+            s.build_seconds,
+            node_bytes,
+            index_bytes
+        );
+    } else {
+        println!("scene               {}", args.scene.display());
+        println!("triangles           {} ({} zero-area)", scene.triangles.len(), scene.degenerate_count);
+        println!("nodes               {}", s.nodes);
+        println!("leaves              {} ({} empty)", s.leaves, s.empty_leaves);
+        println!("depth               max {}, mean leaf {:.2}", s.max_depth, s.mean_leaf_depth);
+        println!("refs per triangle   {:.3}", s.refs_per_triangle);
+        println!("prims per leaf      mean {:.2} (non-empty), max {}", s.mean_prims_per_leaf, s.max_prims_per_leaf);
+        println!("SAH cost            {:.3}", s.sah_cost);
+        println!("build time          {:.3} s", s.build_seconds);
+        println!("memory              {} B nodes, {} B indices", node_bytes, index_bytes);
+    }
+    Ok(())
+}
+
+fn info() -> Result<()> {
+    let devices = list_devices()?;
+    if devices.is_empty() {
+        bail!("no Vulkan device with a compute queue");
+    }
+    for (i, d) in devices.iter().enumerate() {
+        println!("{i}: {d}");
+        println!(
+            "   subgroup size {} (min {}, max {}, size control {}), maxStorageBufferRange {} B",
+            d.subgroup_size, d.min_subgroup_size, d.max_subgroup_size, d.subgroup_size_control, d.max_storage_buffer_range
+        );
+    }
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Render(a) => render(a),
+        Command::Trace(a) => trace(a),
+        Command::Stats(a) => stats(a),
+        Command::Info => info(),
+    }
+}

@@ -1,0 +1,62 @@
+//! Primary-ray rendering: camera rays in, a shaded image out. Shading is a
+//! headlight (a light at the eye) on the MTL diffuse colour; later passes add
+//! shadows, mirrors and diffuse bounces.
+
+use glam::Vec3;
+
+use crate::geom::{Hit, Ray};
+use crate::scene::{Camera, Scene};
+
+/// One ray per pixel through the pixel centre, row-major from the top-left.
+pub fn camera_rays(camera: &Camera, width: u32, height: u32) -> Vec<Ray> {
+    let mut rays = Vec::with_capacity(width as usize * height as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            rays.push(Ray::new(origin, dir, 0.0, f32::INFINITY));
+        }
+    }
+    rays
+}
+
+/// The geometric normal of triangle `prim`, facing against `dir`.
+pub fn facing_normal(scene: &Scene, prim: u32, dir: Vec3) -> Vec3 {
+    let [a, b, c] = scene.triangles[prim as usize];
+    let n = (b - a).cross(c - a).normalize_or_zero();
+    if n.dot(dir) > 0.0 {
+        -n
+    } else {
+        n
+    }
+}
+
+/// Headlight diffuse shading in linear RGB: `Kd · (0.1 + 0.9·|cos θ|) + Ke`,
+/// background a dark grey. Returns one linear colour per ray.
+pub fn shade_headlight(scene: &Scene, rays: &[Ray], hits: &[Hit]) -> Vec<Vec3> {
+    rays.iter()
+        .zip(hits)
+        .map(|(ray, hit)| {
+            if !hit.is_hit() {
+                return Vec3::splat(0.05);
+            }
+            let dir = Vec3::from(ray.dir).normalize_or_zero();
+            let n = facing_normal(scene, hit.prim_id, dir);
+            let m = &scene.materials[scene.material_ids[hit.prim_id as usize] as usize];
+            let cos = n.dot(-dir).abs();
+            m.kd * (0.1 + 0.9 * cos) + m.ke.min(Vec3::ONE)
+        })
+        .collect()
+}
+
+/// sRGB-encodes linear colours into an 8-bit RGB image.
+pub fn to_image(colors: &[Vec3], width: u32, height: u32) -> image::RgbImage {
+    let encode = |c: f32| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+        (s * 255.0 + 0.5) as u8
+    };
+    image::RgbImage::from_fn(width, height, |x, y| {
+        let c = colors[(y * width + x) as usize];
+        image::Rgb([encode(c.x), encode(c.y), encode(c.z)])
+    })
+}
