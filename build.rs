@@ -84,10 +84,7 @@ fn compile(compiler: &shaderc::Compiler, path: &Path, include_dirs: &[PathBuf]) 
         for dir in candidates {
             let p = dir.join(requested);
             if let Ok(content) = fs::read_to_string(&p) {
-                return Ok(shaderc::ResolvedInclude {
-                    resolved_name: p.display().to_string(),
-                    content,
-                });
+                return Ok(shaderc::ResolvedInclude { resolved_name: p.display().to_string(), content });
             }
         }
         Err(format!("{requester}: cannot find include \"{requested}\""))

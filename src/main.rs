@@ -143,20 +143,31 @@ fn render(args: RenderArgs) -> Result<()> {
         }
         camera.fov_deg = fov;
     }
-    if (camera.target - camera.eye).length_squared() == 0.0 || (camera.target - camera.eye).cross(camera.up) == Vec3::ZERO {
+    if (camera.target - camera.eye).length_squared() == 0.0
+        || (camera.target - camera.eye).cross(camera.up) == Vec3::ZERO
+    {
         bail!("the camera is degenerate: eye equals target, or up is parallel to the view direction");
     }
     let ctx = context()?;
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
     let rays = kdtrace::render::camera_rays(&camera, args.width, args.height);
     let bar = trace_bar(rays.len());
-    let result = tracer.trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    let result = tracer
+        .trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
     let colors = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
     let image = kdtrace::render::to_image(&colors, args.width, args.height);
     image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
     let hits = result.hits.iter().filter(|h| h.is_hit()).count();
-    eprint!("{}: {}x{} on {}, {} of {} pixels hit", args.output.display(), args.width, args.height, ctx.info.name, hits, rays.len());
+    eprint!(
+        "{}: {}x{} on {}, {} of {} pixels hit",
+        args.output.display(),
+        args.width,
+        args.height,
+        ctx.info.name,
+        hits,
+        rays.len()
+    );
     if let Some(s) = result.gpu_seconds {
         eprint!(", trace {:.2} ms ({:.2} M rays/s)", s * 1e3, rays.len() as f64 / s / 1e6);
     }
@@ -184,13 +195,20 @@ fn trace(args: TraceArgs) -> Result<()> {
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
     let bar = trace_bar(rays.len());
     let start = Instant::now();
-    let result = tracer.trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    let result = tracer
+        .trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
     kdtrace::io::write_hits(&args.output, &result.hits)?;
     let hits = result.hits.iter().filter(|h| h.is_hit()).count();
     let invalid = result.hits.iter().filter(|h| h.prim_id == kdtrace::consts::PRIM_INVALID).count();
-    eprintln!("{} rays, {} hits, {} invalid (NaN/zero direction or non-finite origin) on {}", rays.len(), hits, invalid, ctx.info.name);
+    eprintln!(
+        "{} rays, {} hits, {} invalid (NaN/zero direction or non-finite origin) on {}",
+        rays.len(),
+        hits,
+        invalid,
+        ctx.info.name
+    );
     match result.gpu_seconds {
         Some(s) if s > 0.0 => eprintln!(
             "traversal ({}): {:.3} ms GPU = {:.2} M rays/s (timestamps, excluding upload; wall incl. transfers {:.3} ms)",
@@ -252,7 +270,11 @@ fn info() -> Result<()> {
         println!("{i}: {d}");
         println!(
             "   subgroup size {} (min {}, max {}, size control {}), maxStorageBufferRange {} B",
-            d.subgroup_size, d.min_subgroup_size, d.max_subgroup_size, d.subgroup_size_control, d.max_storage_buffer_range
+            d.subgroup_size,
+            d.min_subgroup_size,
+            d.max_subgroup_size,
+            d.subgroup_size_control,
+            d.max_storage_buffer_range
         );
     }
     Ok(())

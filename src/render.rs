@@ -30,7 +30,8 @@ pub fn facing_normal(scene: &Scene, prim: u32, dir: Vec3) -> Vec3 {
     }
 }
 
-/// Headlight diffuse shading in linear RGB: `Kd · (0.1 + 0.9·|cos θ|) + Ke`,
+/// Headlight diffuse shading in linear RGB: `Kd · (0.1 + 0.9·|cos θ|) + Ke`
+/// (mirrors, `illum 3` with black `Kd`, use `0.6·Ks` instead of `Kd`);
 /// background a dark grey. Returns one linear colour per ray.
 pub fn shade_headlight(scene: &Scene, rays: &[Ray], hits: &[Hit]) -> Vec<Vec3> {
     rays.iter()
@@ -43,7 +44,9 @@ pub fn shade_headlight(scene: &Scene, rays: &[Ray], hits: &[Hit]) -> Vec<Vec3> {
             let n = facing_normal(scene, hit.prim_id, dir);
             let m = &scene.materials[scene.material_ids[hit.prim_id as usize] as usize];
             let cos = n.dot(-dir).abs();
-            m.kd * (0.1 + 0.9 * cos) + m.ke.min(Vec3::ONE)
+            // Mirrors (black Kd, bright Ks) show as a light grey until reflections exist.
+            let albedo = if m.illum == 3 && m.kd.max_element() < 0.05 { 0.6 * m.ks } else { m.kd };
+            albedo * (0.1 + 0.9 * cos) + m.ke.min(Vec3::ONE)
         })
         .collect()
 }

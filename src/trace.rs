@@ -97,15 +97,7 @@ impl Tracer {
         let by_range = (limit / per_ray.max(32)) as usize;
         let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
         let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
-        Ok(Tracer {
-            ctx: ctx.clone(),
-            nodes,
-            prim_indices,
-            triangles,
-            bounds: tree.bounds,
-            kernels: Vec::new(),
-            chunk,
-        })
+        Ok(Tracer { ctx: ctx.clone(), nodes, prim_indices, triangles, bounds: tree.bounds, kernels: Vec::new(), chunk })
     }
 
     /// The context this tracer runs on.
@@ -166,8 +158,13 @@ impl Tracer {
             MemoryLocation::CpuToGpu,
             "rays",
         )?;
-        let hit_buf =
-            Buffer::new(&ctx, (chunk * 16) as u64, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuToCpu, "hits")?;
+        let hit_buf = Buffer::new(
+            &ctx,
+            (chunk * 16) as u64,
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            MemoryLocation::GpuToCpu,
+            "hits",
+        )?;
         let counter_bytes = if options.counters { chunk * COUNTERS_PER_RAY as usize * 4 } else { 4 };
         let counter_buf = Buffer::new(
             &ctx,
@@ -231,11 +228,7 @@ impl Tracer {
             let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * 16)?);
             if let Some(first) = hits.iter().position(|h| h.prim_id == PRIM_INCOMPLETE) {
                 let count = hits.iter().filter(|h| h.prim_id == PRIM_INCOMPLETE).count();
-                return Err(Error::Incomplete {
-                    count,
-                    first: chunk_index * chunk + first,
-                    cap: MAX_TRAVERSAL_STEPS,
-                });
+                return Err(Error::Incomplete { count, first: chunk_index * chunk + first, cap: MAX_TRAVERSAL_STEPS });
             }
             result.hits.extend_from_slice(hits);
             if let Some(out) = result.counters.as_mut() {

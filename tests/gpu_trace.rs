@@ -15,7 +15,10 @@ use kdtrace::trace::{TraceOptions, Tracer};
 use kdtrace::{Hit, Ray};
 
 fn same_bits(a: &Hit, b: &Hit) -> bool {
-    a.t.to_bits() == b.t.to_bits() && a.prim_id == b.prim_id && a.u.to_bits() == b.u.to_bits() && a.v.to_bits() == b.v.to_bits()
+    a.t.to_bits() == b.t.to_bits()
+        && a.prim_id == b.prim_id
+        && a.u.to_bits() == b.u.to_bits()
+        && a.v.to_bits() == b.v.to_bits()
 }
 
 fn check_scene(name: &str, random: usize) {
@@ -26,7 +29,9 @@ fn check_scene(name: &str, random: usize) {
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
 
     let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), &stem).unwrap().unwrap_or_else(|| Camera::frame(&scene.bounds));
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), &stem)
+        .unwrap()
+        .unwrap_or_else(|| Camera::frame(&scene.bounds));
     let mut rays = camera_rays(&camera, 64, 48);
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15 ^ name.len() as u64);
     rays.extend(random_rays(&mut rng, scene.bounds.min, scene.bounds.max, random));
@@ -34,7 +39,12 @@ fn check_scene(name: &str, random: usize) {
     let away = scene.bounds.max + scene.bounds.extent();
     rays.extend((0..64).map(|_| Ray::new(away, rng.unit_vector().abs() + Vec3::splat(0.01), 0.0, f32::INFINITY)));
 
-    let cpu_scene = SceneRef { nodes: &tree.nodes, prim_indices: &tree.prim_indices, triangles: &scene.triangles, bounds: tree.bounds };
+    let cpu_scene = SceneRef {
+        nodes: &tree.nodes,
+        prim_indices: &tree.prim_indices,
+        triangles: &scene.triangles,
+        bounds: tree.bounds,
+    };
     for variant in Variant::ALL {
         let gpu = tracer.trace(&rays, &TraceOptions { variant, counters: true }).unwrap();
         let gpu_counters = gpu.counters.as_ref().unwrap();
@@ -68,7 +78,10 @@ fn check_scene(name: &str, random: usize) {
             disagreements.iter().take(10).cloned().collect::<Vec<_>>().join("\n")
         );
         assert!(grazing * 1000 <= rays.len(), "{name} {variant:?}: {grazing} grazing disagreements is too many");
-        eprintln!("{name} {variant:?}: {} rays, {hits} hits, GPU == CPU twin; float64 reference: {grazing} grazing, 0 wrong", rays.len());
+        eprintln!(
+            "{name} {variant:?}: {} rays, {hits} hits, GPU == CPU twin; float64 reference: {grazing} grazing, 0 wrong",
+            rays.len()
+        );
     }
     drop(tracer);
     assert_validation_clean(&ctx);
@@ -120,8 +133,8 @@ fn invalid_and_empty_rays_are_flagged_not_traced() {
         Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), forward, 0.0, f32::INFINITY),
         Ray::new(Vec3::new(f32::INFINITY, 0.0, 0.0), forward, 0.0, f32::INFINITY),
         Ray::new(o, forward, f32::NAN, f32::INFINITY),
-        Ray::new(o, forward, 10.0, 5.0),        // tmin > tmax: a valid empty segment
-        Ray::new(o, forward, 0.0, 1.0),         // stops before the box
+        Ray::new(o, forward, 10.0, 5.0),          // tmin > tmax: a valid empty segment
+        Ray::new(o, forward, 0.0, 1.0),           // stops before the box
         Ray::new(o, forward, 0.0, f32::INFINITY), // hits the back wall
         Ray::new(o, Vec3::new(0.0, -0.0, 1.0), 0.0, f32::INFINITY), // signed zero
     ];

@@ -90,7 +90,8 @@ impl Buffer {
 
     /// Copies `data` into a host-visible buffer at `offset`.
     pub fn write(&mut self, offset: usize, data: &[u8]) -> Result<()> {
-        let slice = self.mapped_mut().ok_or_else(|| Error::InvalidInput("write to a buffer that is not mapped".into()))?;
+        let slice =
+            self.mapped_mut().ok_or_else(|| Error::InvalidInput("write to a buffer that is not mapped".into()))?;
         let end = offset.checked_add(data.len()).filter(|&e| e <= slice.len());
         let end = end.ok_or_else(|| Error::InvalidInput("write past the end of a buffer".into()))?;
         slice[offset..end].copy_from_slice(data);

@@ -142,7 +142,8 @@ impl GpuContext {
             Validation::Required if has_validation => true,
             Validation::Required => {
                 return Err(Error::NoDevice(
-                    "VK_LAYER_KHRONOS_validation is required but not installed (Debian: vulkan-validationlayers)".into(),
+                    "VK_LAYER_KHRONOS_validation is required but not installed (Debian: vulkan-validationlayers)"
+                        .into(),
                 ))
             }
         };
@@ -153,10 +154,8 @@ impl GpuContext {
             .unwrap_or(vk::API_VERSION_1_0);
         let api_version = if loader_version >= vk::API_VERSION_1_3 { vk::API_VERSION_1_3 } else { vk::API_VERSION_1_2 };
         let app_name = CString::new("kdtrace").unwrap();
-        let app_info = vk::ApplicationInfo::default()
-            .application_name(&app_name)
-            .engine_name(&app_name)
-            .api_version(api_version);
+        let app_info =
+            vk::ApplicationInfo::default().application_name(&app_name).engine_name(&app_name).api_version(api_version);
         let layer_names: Vec<*const i8> = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
         let ext_names: Vec<*const i8> = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
         let create_info = vk::InstanceCreateInfo::default()
@@ -231,7 +230,8 @@ impl GpuContext {
                 debug,
             ));
         }
-        let enabled = vk::PhysicalDeviceFeatures::default().shader_float64(true).shader_int64(features.shader_int64 != 0);
+        let enabled =
+            vk::PhysicalDeviceFeatures::default().shader_float64(true).shader_int64(features.shader_int64 != 0);
         let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(info.subgroup_size_control)
             .compute_full_subgroups(info.subgroup_size_control);
@@ -340,7 +340,8 @@ impl GpuContext {
             // SAFETY: recording was begun above.
             unsafe { self.device.end_command_buffer(cmd) }.vk("vkEndCommandBuffer")?;
             // SAFETY: a plain fence.
-            let fence = unsafe { self.device.create_fence(&vk::FenceCreateInfo::default(), None) }.vk("vkCreateFence")?;
+            let fence =
+                unsafe { self.device.create_fence(&vk::FenceCreateInfo::default(), None) }.vk("vkCreateFence")?;
             let cmds = [cmd];
             let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
             let submitted = {
@@ -404,7 +405,10 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
             .create_instance(&vk::InstanceCreateInfo::default().application_info(&app_info), None)
             .vk("vkCreateInstance")?;
         let result = instance.enumerate_physical_devices().vk("vkEnumeratePhysicalDevices").map(|devices| {
-            devices.into_iter().filter_map(|pd| compute_family(&instance, pd).map(|_| describe(&instance, pd))).collect()
+            devices
+                .into_iter()
+                .filter_map(|pd| compute_family(&instance, pd).map(|_| describe(&instance, pd)))
+                .collect()
         });
         instance.destroy_instance(None);
         result

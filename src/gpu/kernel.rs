@@ -104,7 +104,8 @@ impl Kernel {
                 .name(c"main")
                 .specialization_info(&spec);
             if desc.required_subgroup_size.is_some() {
-                stage = stage.push_next(&mut subgroup).flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS);
+                stage =
+                    stage.push_next(&mut subgroup).flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS);
             }
             let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
             let pipeline = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
@@ -174,7 +175,8 @@ impl BufferSet {
             )));
         }
         let device = &ctx.device;
-        let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: kernel.bindings }];
+        let sizes =
+            [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: kernel.bindings }];
         // SAFETY: valid create/allocate infos; the pool is destroyed in Drop.
         unsafe {
             let pool = device
@@ -262,7 +264,12 @@ impl Timestamps {
         unsafe {
             self.ctx
                 .device
-                .get_query_pool_results(self.pool, 0, &mut data, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT)
+                .get_query_pool_results(
+                    self.pool,
+                    0,
+                    &mut data,
+                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                )
                 .vk("vkGetQueryPoolResults")?;
         }
         let ticks = data[b as usize].wrapping_sub(data[a as usize]);

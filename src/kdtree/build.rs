@@ -725,9 +725,8 @@ mod tests {
                 if dir == Vec3::ZERO {
                     dir = Vec3::X;
                 }
-                if k % 4 == 0 {
+                if k % 4 == 0 && tmax == f32::INFINITY {
                     dir = dir.normalize();
-                    tmax *= 1.0;
                 }
                 Ray::new(origin, dir, tmin, tmax)
             })
@@ -1014,24 +1013,5 @@ mod tests {
         let tree = KdTree::build(&tris, &config);
         eprintln!("1M soup: {}", tree.stats);
         check_tree(&tris, &tree, &config);
-    }
-
-    #[test]
-    fn scratch_traverse_rs() {
-        use crate::kdtree::traverse::{trace_ray, SceneRef, Variant};
-        for (name, tris) in [("teapot", teapot()), ("soup", soup(3, 2000, 0.05))].into_iter().chain(structured()) {
-            if tris.iter().all(is_skipped) { continue; }
-            let tree = KdTree::build(&tris, &BuildConfig::default());
-            let scene = SceneRef { nodes: &tree.nodes, prim_indices: &tree.prim_indices, triangles: &tris, bounds: tree.bounds };
-            let rays = random_rays(5, &tris, &tree, 500);
-            for v in Variant::ALL {
-                let mut bad = 0; let mut graze = 0;
-                for ray in &rays {
-                    let (hit, _) = trace_ray(&scene, ray, v);
-                    match agrees(&tris, ray, &hit) { Agreement::Disagree(w) => { if bad < 2 { eprintln!("{name} {v:?}: {w}"); } bad += 1 }, Agreement::Grazing => graze += 1, _ => {} }
-                }
-                eprintln!("{name} {v:?}: {bad} disagree, {graze} grazing of {}", rays.len());
-            }
-        }
     }
 }

@@ -118,6 +118,10 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, variant: Variant) -> (Hit, Counter
     (best, c)
 }
 
+/// 1 + 2·gamma(3) with gamma(n) = n·u / (1 - n·u), u = 2^-24, rounded up: 1 + 3·2^-23
+/// (Ize 2013). Widens the far bound so rounding never clips away a hit on the box.
+const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
+
 /// Slab clip of [tmin, tmax] to the scene box; twin of `clip_to_box` in common.glsl.
 fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
     let mut t0 = r.tmin;
@@ -133,7 +137,7 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
         let ta = (b.min[axis] - o) * r.inv_dir[axis];
         let tb = (b.max[axis] - o) * r.inv_dir[axis];
         let tnear = glsl_min(ta, tb);
-        let tfar = glsl_max(ta, tb) * 1.000_000_357_627_868_7;
+        let tfar = glsl_max(ta, tb) * TFAR_SCALE;
         t0 = glsl_max(t0, tnear);
         t1 = glsl_min(t1, tfar);
     }
