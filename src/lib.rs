@@ -5,6 +5,7 @@ pub mod geom;
 pub mod gpu;
 pub mod io;
 pub mod kdtree;
+pub mod raygen;
 pub mod reference;
 pub mod render;
 pub mod scene;

@@ -29,6 +29,8 @@ enum Command {
     Trace(TraceArgs),
     /// Build the kd-tree and print its statistics.
     Stats(StatsArgs),
+    /// Write a ray file: camera rays or random rays for a scene.
+    Rays(RaysArgs),
     /// List the Vulkan devices and their subgroup properties.
     Info,
 }
@@ -82,6 +84,29 @@ struct StatsArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(clap::Args)]
+struct RaysArgs {
+    /// OBJ scene file (its box and camera place the rays).
+    scene: PathBuf,
+    /// Ray file to write.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// camera: one ray per pixel of the scene's camera; random: uniform origins in the box, uniform directions.
+    #[arg(long, default_value = "camera")]
+    kind: String,
+    /// Image size for camera rays.
+    #[arg(long, default_value_t = 800)]
+    width: u32,
+    #[arg(long, default_value_t = 600)]
+    height: u32,
+    /// Number of random rays.
+    #[arg(short = 'n', long, default_value_t = 1_000_000)]
+    count: usize,
+    /// Seed of the random rays.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
 }
 
 fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
@@ -261,6 +286,23 @@ fn stats(args: StatsArgs) -> Result<()> {
     Ok(())
 }
 
+fn rays(args: RaysArgs) -> Result<()> {
+    let scene = Scene::load(&args.scene)?;
+    let rays = match args.kind.as_str() {
+        "camera" => {
+            if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
+                bail!("--width and --height must be in 1..=16384");
+            }
+            kdtrace::render::camera_rays(&default_camera(&args.scene, &scene)?, args.width, args.height)
+        }
+        "random" => kdtrace::raygen::random_rays(&scene.bounds, args.count, args.seed),
+        other => bail!("unknown --kind '{other}' (camera, random)"),
+    };
+    kdtrace::io::write_rays(&args.output, &rays)?;
+    eprintln!("{}: {} {} rays", args.output.display(), rays.len(), args.kind);
+    Ok(())
+}
+
 fn info() -> Result<()> {
     let devices = list_devices()?;
     if devices.is_empty() {
@@ -286,6 +328,7 @@ fn main() -> Result<()> {
         Command::Render(a) => render(a),
         Command::Trace(a) => trace(a),
         Command::Stats(a) => stats(a),
+        Command::Rays(a) => rays(a),
         Command::Info => info(),
     }
 }

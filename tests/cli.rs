@@ -1,0 +1,96 @@
+//! The `kdtrace` binary end to end: render, rays, trace, stats and bad input.
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use common::scene_path;
+
+fn kdtrace(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_kdtrace")).args(args).env("KDTRACE_VALIDATION", "1").output().unwrap()
+}
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("kdtrace-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn render_writes_a_png_of_the_cornell_box() {
+    let out = temp("cornell.png");
+    let scene = scene_path("cornell_box.obj");
+    let o =
+        kdtrace(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "160", "--height", "120"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("validation:"), "{}", stderr(&o));
+    let img = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (160, 120));
+    // The left wall is red and the right wall green (Kd of the MTL).
+    let left = img.get_pixel(25, 60);
+    let right = img.get_pixel(135, 60);
+    assert!(left[0] > left[1] + 40 && left[0] > left[2] + 40, "left wall {left:?}");
+    assert!(right[1] > right[0] + 40 && right[1] > right[2] + 40, "right wall {right:?}");
+}
+
+#[test]
+fn rays_then_trace_writes_one_hit_per_ray() {
+    let scene = scene_path("teapot.obj");
+    let rays = temp("teapot.rays");
+    let hits = temp("teapot.hits");
+    let o = kdtrace(&["rays", scene.to_str().unwrap(), "-o", rays.to_str().unwrap(), "--kind", "random", "-n", "5000"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(std::fs::metadata(&rays).unwrap().len(), 5000 * 32);
+    for traversal in ["stack", "restart"] {
+        let o = kdtrace(&[
+            "trace",
+            scene.to_str().unwrap(),
+            rays.to_str().unwrap(),
+            "-o",
+            hits.to_str().unwrap(),
+            "--traversal",
+            traversal,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains("M rays/s"), "{}", stderr(&o));
+        let hits = kdtrace::io::read_hits(&hits).unwrap();
+        assert_eq!(hits.len(), 5000);
+        assert!(hits.iter().filter(|h| h.is_hit()).count() > 500);
+    }
+}
+
+#[test]
+fn malformed_inputs_fail_with_a_message_naming_them() {
+    let scene = scene_path("teapot.obj");
+    let bad_rays = temp("bad.rays");
+    std::fs::write(&bad_rays, [0u8; 33]).unwrap();
+    let o = kdtrace(&["trace", scene.to_str().unwrap(), bad_rays.to_str().unwrap(), "-o", "/dev/null"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bad.rays") && stderr(&o).contains("multiple of the 32-byte"), "{}", stderr(&o));
+
+    let bad_obj = temp("bad.obj");
+    std::fs::write(&bad_obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n").unwrap();
+    let o = kdtrace(&["render", bad_obj.to_str().unwrap(), "-o", temp("x.png").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("bad.obj:4"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+
+    let o = kdtrace(&["render", scene.to_str().unwrap(), "--traversal", "sideways"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("unknown traversal"), "{}", stderr(&o));
+}
+
+#[test]
+fn stats_prints_json() {
+    let scene = scene_path("cornell_box.obj");
+    let o = kdtrace(&["stats", scene.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("\"triangles\":38"), "{text}");
+    assert!(text.contains("\"nodes\":"), "{text}");
+}

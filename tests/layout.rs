@@ -1,0 +1,123 @@
+//! Proves that the Rust mirrors of the shared GLSL structs agree with the shader's
+//! view of them: sizes and offsets on the Rust side, field by field on the GPU
+//! side (glsl/layout_probe.comp reads each struct and writes its fields back).
+
+mod common;
+
+use std::mem::{offset_of, size_of};
+
+use ash::vk;
+use common::{assert_validation_clean, context};
+use gpu_allocator::MemoryLocation;
+use kdtrace::gpu::{shaders, Buffer, BufferSet, Kernel, KernelDesc};
+use kdtrace::kdtree::KdNode;
+use kdtrace::trace::TraceParams;
+use kdtrace::{Hit, Ray};
+
+#[test]
+fn rust_sizes_and_offsets_match_std430() {
+    assert_eq!(size_of::<Ray>(), 32);
+    assert_eq!(offset_of!(Ray, origin), 0);
+    assert_eq!(offset_of!(Ray, tmin), 12);
+    assert_eq!(offset_of!(Ray, dir), 16);
+    assert_eq!(offset_of!(Ray, tmax), 28);
+    assert_eq!(size_of::<Hit>(), 16);
+    assert_eq!(offset_of!(Hit, t), 0);
+    assert_eq!(offset_of!(Hit, prim_id), 4);
+    assert_eq!(offset_of!(Hit, u), 8);
+    assert_eq!(offset_of!(Hit, v), 12);
+    assert_eq!(size_of::<KdNode>(), 8);
+    assert_eq!(offset_of!(KdNode, word0), 0);
+    assert_eq!(offset_of!(KdNode, word1), 4);
+    assert_eq!(size_of::<TraceParams>(), 48);
+    assert_eq!(offset_of!(TraceParams, scene_min), 0);
+    assert_eq!(offset_of!(TraceParams, scene_max), 16);
+    assert_eq!(offset_of!(TraceParams, ray_count), 32);
+}
+
+#[test]
+fn gpu_reads_every_field_where_rust_wrote_it() {
+    let ctx = context();
+    let rays =
+        [Ray::default(), Ray { origin: [1.5, -2.25, 3.0], tmin: 0.125, dir: [-4.0, 5.5, -6.75], tmax: f32::INFINITY }];
+    let hits = [Hit::MISS, Hit { t: 7.5, prim_id: 123_456, u: 0.25, v: 0.625 }];
+    let nodes = [KdNode::leaf(0, 0), KdNode::interior(2, -17.5, 98_765), KdNode::leaf(4321, 77)];
+    let params = TraceParams {
+        scene_min: [-1.0, -2.0, -3.0, 42.0],
+        scene_max: [4.0, 5.0, 6.0, 0.0],
+        ray_count: 987_654,
+        pad: [11, 22, 33],
+    };
+    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let ray_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&rays), usage, "rays").unwrap();
+    let hit_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&hits), usage, "hits").unwrap();
+    let node_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&nodes), usage, "nodes").unwrap();
+    let out = Buffer::new(&ctx, 4 * 64, usage, MemoryLocation::GpuToCpu, "words").unwrap();
+    let kernel = Kernel::new(
+        &ctx,
+        &KernelDesc {
+            name: "layout_probe",
+            spirv: shaders::LAYOUT_PROBE,
+            bindings: 4,
+            push_constant_size: size_of::<TraceParams>() as u32,
+            workgroup_size: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let set = BufferSet::new(&ctx, &kernel, &[&ray_buf, &hit_buf, &node_buf, &out]).unwrap();
+    ctx.submit_and_wait(|cmd| {
+        // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
+        unsafe {
+            kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), 1);
+            let barrier = vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ);
+            ctx.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            );
+        }
+    })
+    .unwrap();
+    let words: &[u32] = bytemuck::cast_slice(out.read(0, 4 * 25).unwrap());
+    let r = rays[1];
+    let h = hits[1];
+    let expected: Vec<u32> = vec![
+        r.origin[0].to_bits(),
+        r.origin[1].to_bits(),
+        r.origin[2].to_bits(),
+        r.tmin.to_bits(),
+        r.dir[0].to_bits(),
+        r.dir[1].to_bits(),
+        r.dir[2].to_bits(),
+        r.tmax.to_bits(),
+        h.t.to_bits(),
+        h.prim_id,
+        h.u.to_bits(),
+        h.v.to_bits(),
+        0,
+        nodes[1].axis() as u32,
+        nodes[1].split().to_bits(),
+        nodes[1].above_child(),
+        1,
+        nodes[2].prim_count(),
+        nodes[2].prim_offset(),
+        params.scene_min[0].to_bits(),
+        params.scene_min[3].to_bits(),
+        params.scene_max[1].to_bits(),
+        params.ray_count,
+        params.pad[0],
+        params.pad[2],
+    ];
+    assert_eq!(words, &expected[..]);
+    assert_eq!((nodes[1].axis(), nodes[1].split(), nodes[1].above_child()), (2, -17.5, 98_765));
+    assert_eq!((nodes[2].prim_count(), nodes[2].prim_offset()), (77, 4321));
+    drop((set, kernel, ray_buf, hit_buf, node_buf, out));
+    assert_validation_clean(&ctx);
+}
