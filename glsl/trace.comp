@@ -15,8 +15,11 @@
 
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
+// Specialization constants (src/trace.rs sets them; never edit the source to switch).
 layout(constant_id = 0) const uint VARIANT = VARIANT_STACK;
 layout(constant_id = 1) const bool COUNTERS = false;
+layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
+layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
 
 layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { uvec2 nodes[]; };
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
@@ -24,12 +27,20 @@ layout(std430, set = 0, binding = BINDING_TRIANGLES) readonly buffer Triangles {
 layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
 layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Counters { uint counters[]; };
+// Side buffers of backtrack and ropes (a 4-byte dummy is bound for the others).
+layout(std430, set = 0, binding = BINDING_PARENTS) readonly buffer Parents { uint parents[]; };
+layout(std430, set = 0, binding = BINDING_NODE_BOXES) readonly buffer NodeBoxes { float node_boxes[]; };
+layout(std430, set = 0, binding = BINDING_ROPES) readonly buffer Ropes { uint ropes[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
 
 #include "common.glsl"
 #include "stack.glsl"
 #include "restart.glsl"
+#include "push_down.glsl"
+#include "short_stack.glsl"
+#include "backtrack.glsl"
+#include "ropes.glsl"
 
 bool ray_is_valid(Ray ray) {
     bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
@@ -47,7 +58,7 @@ void main() {
     best.prim_id = PRIM_MISS;
     best.u = 0.0;
     best.v = 0.0;
-    TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u);
+    TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
 
     if (!ray_is_valid(ray)) {
         best.prim_id = PRIM_INVALID;
@@ -64,6 +75,16 @@ void main() {
             bool finished;
             if (VARIANT == VARIANT_RESTART) {
                 finished = trace_restart(r, t0, t1, best, c);
+            } else if (VARIANT == VARIANT_PUSH_DOWN) {
+                finished = trace_push_down(r, t0, t1, best, c);
+            } else if (VARIANT == VARIANT_SHORT_STACK) {
+                finished = trace_short_stack(r, t0, t1, false, best, c);
+            } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
+                finished = trace_short_stack(r, t0, t1, true, best, c);
+            } else if (VARIANT == VARIANT_BACKTRACK) {
+                finished = trace_backtrack(r, t0, t1, best, c);
+            } else if (VARIANT == VARIANT_ROPES) {
+                finished = trace_ropes(r, t0, t1, best, c);
             } else {
                 finished = trace_stack(r, t0, t1, best, c);
             }
@@ -83,5 +104,6 @@ void main() {
         counters[base + COUNTER_TRIANGLES] = c.triangles;
         counters[base + COUNTER_RESTARTS] = c.restarts;
         counters[base + COUNTER_STEPS] = c.steps;
+        counters[base + COUNTER_DROPS] = c.drops;
     }
 }

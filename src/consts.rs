@@ -9,6 +9,10 @@ pub const MAX_TREE_DEPTH: u32 = 48;
 pub const MAX_STACK: u32 = MAX_TREE_DEPTH + 1;
 /// Traversal steps after which a ray gives up and is reported as capped.
 pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
+/// Largest short stack (`short-stack` variants); the paper used 3.
+pub const MAX_SHORT_STACK: u32 = 8;
+/// `ropes` entry of a face on the scene boundary.
+pub const NO_ROPE: u32 = 0xFFFF_FFFF;
 
 /// `Hit::prim_id` of a ray that hit nothing.
 pub const PRIM_MISS: u32 = 0xFFFF_FFFF;
@@ -20,6 +24,11 @@ pub const PRIM_INCOMPLETE: u32 = 0xFFFF_FFFD;
 /// Traversal variant ids (specialization constant 0 of the trace kernel).
 pub const VARIANT_STACK: u32 = 0;
 pub const VARIANT_RESTART: u32 = 1;
+pub const VARIANT_PUSH_DOWN: u32 = 2;
+pub const VARIANT_SHORT_STACK: u32 = 3;
+pub const VARIANT_PUSH_DOWN_SHORT_STACK: u32 = 4;
+pub const VARIANT_BACKTRACK: u32 = 5;
+pub const VARIANT_ROPES: u32 = 6;
 
 /// Descriptor bindings of the trace kernel (set 0).
 pub const BINDING_NODES: u32 = 0;
@@ -28,6 +37,12 @@ pub const BINDING_TRIANGLES: u32 = 2;
 pub const BINDING_RAYS: u32 = 3;
 pub const BINDING_HITS: u32 = 4;
 pub const BINDING_COUNTERS: u32 = 5;
+/// Side buffers, bound only by the variants that need them (a dummy otherwise).
+pub const BINDING_PARENTS: u32 = 6;
+pub const BINDING_NODE_BOXES: u32 = 7;
+pub const BINDING_ROPES: u32 = 8;
+/// Number of bindings of the trace kernel.
+pub const TRACE_BINDINGS: u32 = 9;
 
 /// Per-ray counters written when counters are on (u32 each).
 pub const COUNTER_NODES: u32 = 0;
@@ -35,6 +50,7 @@ pub const COUNTER_LEAVES: u32 = 1;
 pub const COUNTER_TRIANGLES: u32 = 2;
 pub const COUNTER_RESTARTS: u32 = 3;
 pub const COUNTER_STEPS: u32 = 4;
+pub const COUNTER_DROPS: u32 = 5;
 pub const COUNTERS_PER_RAY: u32 = 8;
 
 /// Every constant above, as `#define`s for the shaders.
@@ -43,21 +59,32 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAX_TREE_DEPTH", MAX_TREE_DEPTH),
     ("MAX_STACK", MAX_STACK),
     ("MAX_TRAVERSAL_STEPS", MAX_TRAVERSAL_STEPS),
+    ("MAX_SHORT_STACK", MAX_SHORT_STACK),
+    ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),
     ("PRIM_INCOMPLETE", PRIM_INCOMPLETE),
     ("VARIANT_STACK", VARIANT_STACK),
     ("VARIANT_RESTART", VARIANT_RESTART),
+    ("VARIANT_PUSH_DOWN", VARIANT_PUSH_DOWN),
+    ("VARIANT_SHORT_STACK", VARIANT_SHORT_STACK),
+    ("VARIANT_PUSH_DOWN_SHORT_STACK", VARIANT_PUSH_DOWN_SHORT_STACK),
+    ("VARIANT_BACKTRACK", VARIANT_BACKTRACK),
+    ("VARIANT_ROPES", VARIANT_ROPES),
     ("BINDING_NODES", BINDING_NODES),
     ("BINDING_PRIM_INDICES", BINDING_PRIM_INDICES),
     ("BINDING_TRIANGLES", BINDING_TRIANGLES),
     ("BINDING_RAYS", BINDING_RAYS),
     ("BINDING_HITS", BINDING_HITS),
     ("BINDING_COUNTERS", BINDING_COUNTERS),
+    ("BINDING_PARENTS", BINDING_PARENTS),
+    ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
+    ("BINDING_ROPES", BINDING_ROPES),
     ("COUNTER_NODES", COUNTER_NODES),
     ("COUNTER_LEAVES", COUNTER_LEAVES),
     ("COUNTER_TRIANGLES", COUNTER_TRIANGLES),
     ("COUNTER_RESTARTS", COUNTER_RESTARTS),
     ("COUNTER_STEPS", COUNTER_STEPS),
+    ("COUNTER_DROPS", COUNTER_DROPS),
     ("COUNTERS_PER_RAY", COUNTERS_PER_RAY),
 ];

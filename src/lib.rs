@@ -1,4 +1,5 @@
 //! kdtrace: SAH kd-tree ray tracing on the GPU through Vulkan compute.
+pub mod bench;
 pub mod consts;
 pub mod error;
 pub mod geom;

@@ -9,7 +9,7 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use kdtrace::gpu::{list_devices, ContextOptions, GpuContext};
-use kdtrace::kdtree::traverse::Variant;
+use kdtrace::kdtree::traverse::{Counters, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::scene::{Camera, Scene};
 use kdtrace::trace::{TraceOptions, Tracer};
@@ -31,6 +31,8 @@ enum Command {
     Stats(StatsArgs),
     /// Write a ray file: camera rays or random rays for a scene.
     Rays(RaysArgs),
+    /// Compare the traversal variants: rays/s, per-ray counters, hit agreement.
+    Bench(BenchArgs),
     /// List the Vulkan devices and their subgroup properties.
     Info,
 }
@@ -58,9 +60,52 @@ struct RenderArgs {
     /// Vertical field of view in degrees.
     #[arg(long)]
     fov: Option<f32>,
-    /// Traversal variant: stack | restart.
+    #[command(flatten)]
+    traversal: TraversalArgs,
+    /// Write a per-pixel cost heatmap instead of the shaded image: nodes | triangles.
+    #[arg(long)]
+    heatmap: Option<String>,
+}
+
+#[derive(clap::Args, Clone)]
+struct TraversalArgs {
+    /// Traversal: stack | restart | push-down | short-stack | push-down-short-stack | backtrack | ropes.
     #[arg(long, default_value = "stack")]
     traversal: String,
+    /// Short-stack entries (1..=8) for short-stack and push-down-short-stack.
+    #[arg(long, default_value_t = 3)]
+    stack_size: u32,
+}
+
+impl TraversalArgs {
+    fn parse(&self, any_hit: bool) -> Result<Traversal> {
+        let traversal = Traversal { variant: self.traversal.parse()?, stack_size: self.stack_size, any_hit };
+        traversal.validate()?;
+        Ok(traversal)
+    }
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// Camera rays: image width and height.
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 384)]
+    height: u32,
+    /// Random rays (uniform origins in the box, uniform directions).
+    #[arg(long, default_value_t = 200_000)]
+    random: usize,
+    /// Timed repetitions per traversal (after one warm-up); the median is reported.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Rays per batch checked against the float64 brute force.
+    #[arg(long, default_value_t = 1000)]
+    reference_sample: usize,
+    /// Comma-separated traversals (default: all, short stacks of 1, 2, 3 and 8).
+    #[arg(long)]
+    traversals: Option<String>,
 }
 
 #[derive(clap::Args)]
@@ -72,9 +117,14 @@ struct TraceArgs {
     /// Hit file to write: 16-byte records t prim_id u v.
     #[arg(short, long)]
     output: PathBuf,
-    /// Traversal variant: stack | restart.
-    #[arg(long, default_value = "stack")]
-    traversal: String,
+    #[command(flatten)]
+    traversal: TraversalArgs,
+    /// Any-hit (shadow-ray) mode: report the first occluder found, not the closest hit.
+    #[arg(long)]
+    any_hit: bool,
+    /// Write per-ray counters (nodes, leaves, triangles, restarts, steps, drops) to this CSV.
+    #[arg(long)]
+    counters: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -150,7 +200,12 @@ fn render(args: RenderArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
         bail!("--width and --height must be in 1..=16384");
     }
-    let variant: Variant = args.traversal.parse()?;
+    let traversal = args.traversal.parse(false)?;
+    let heatmap = match args.heatmap.as_deref() {
+        None => None,
+        Some(h @ ("nodes" | "triangles")) => Some(h.to_string()),
+        Some(other) => bail!("unknown --heatmap '{other}' (nodes, triangles)"),
+    };
     let (scene, tree) = load_and_build(&args.scene)?;
     let mut camera = default_camera(&args.scene, &scene)?;
     if let Some(eye) = args.eye {
@@ -177,11 +232,22 @@ fn render(args: RenderArgs) -> Result<()> {
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
     let rays = kdtrace::render::camera_rays(&camera, args.width, args.height);
     let bar = trace_bar(rays.len());
-    let result = tracer
-        .trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    let options = TraceOptions { traversal, counters: heatmap.is_some() };
+    let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
-    let colors = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
-    let image = kdtrace::render::to_image(&colors, args.width, args.height);
+    let image = match (&heatmap, &result.counters) {
+        (Some(kind), Some(counters)) => {
+            let values: Vec<u32> =
+                counters.iter().map(|c| if kind == "nodes" { c.nodes } else { c.triangles }).collect();
+            let (image, max, mean) = kdtrace::render::heatmap(&values, args.width, args.height);
+            eprintln!("heatmap of {kind} per ray ({}): mean {mean:.1}, max {max}", traversal.variant);
+            image
+        }
+        _ => {
+            let colors = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
+            kdtrace::render::to_image(&colors, args.width, args.height)
+        }
+    };
     image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
     let hits = result.hits.iter().filter(|h| h.is_hit()).count();
     eprint!(
@@ -213,18 +279,33 @@ fn default_camera(path: &Path, scene: &Scene) -> Result<Camera> {
 }
 
 fn trace(args: TraceArgs) -> Result<()> {
-    let variant: Variant = args.traversal.parse()?;
+    let traversal = args.traversal.parse(args.any_hit)?;
+    let variant = traversal.variant;
     let rays = kdtrace::io::read_rays(&args.rays)?;
     let (scene, tree) = load_and_build(&args.scene)?;
     let ctx = context()?;
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
     let bar = trace_bar(rays.len());
     let start = Instant::now();
-    let result = tracer
-        .trace_with_progress(&rays, &TraceOptions { variant, counters: false }, |n| bar.set_position(n as u64))?;
+    let options = TraceOptions { traversal, counters: args.counters.is_some() };
+    let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
     kdtrace::io::write_hits(&args.output, &result.hits)?;
+    if let (Some(path), Some(counters)) = (&args.counters, &result.counters) {
+        write_counters_csv(path, counters)?;
+        let n = counters.len().max(1) as f64;
+        let mean = |f: fn(&Counters) -> u32| counters.iter().map(|c| f(c) as f64).sum::<f64>() / n;
+        eprintln!(
+            "per ray: {:.1} nodes, {:.2} leaves, {:.1} triangles, {:.2} restarts, {:.2} drops ({})",
+            mean(|c| c.nodes),
+            mean(|c| c.leaves),
+            mean(|c| c.triangles),
+            mean(|c| c.restarts),
+            mean(|c| c.drops),
+            path.display()
+        );
+    }
     let hits = result.hits.iter().filter(|h| h.is_hit()).count();
     let invalid = result.hits.iter().filter(|h| h.prim_id == kdtrace::consts::PRIM_INVALID).count();
     eprintln!(
@@ -243,6 +324,80 @@ fn trace(args: TraceArgs) -> Result<()> {
             wall * 1e3
         ),
         _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", variant.name(), wall * 1e3),
+    }
+    Ok(())
+}
+
+fn write_counters_csv(path: &Path, counters: &[Counters]) -> Result<()> {
+    use std::io::Write;
+    let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut out = std::io::BufWriter::new(file);
+    writeln!(out, "ray,nodes,leaves,triangles,restarts,steps,drops")?;
+    for (i, c) in counters.iter().enumerate() {
+        writeln!(out, "{i},{},{},{},{},{},{}", c.nodes, c.leaves, c.triangles, c.restarts, c.steps, c.drops)?;
+    }
+    out.flush().with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+fn bench(args: BenchArgs) -> Result<()> {
+    let traversals: Vec<Traversal> = match &args.traversals {
+        Some(list) => list
+            .split(',')
+            .map(|item| {
+                let (name, size) = match item.trim().split_once(':') {
+                    Some((n, s)) => (n, s.parse::<u32>().with_context(|| format!("stack size in '{item}'"))?),
+                    None => (item.trim(), 3),
+                };
+                let t = Traversal { variant: name.parse()?, stack_size: size, any_hit: false };
+                t.validate()?;
+                Ok(t)
+            })
+            .collect::<Result<_>>()?,
+        None => {
+            let mut all = vec![];
+            for v in Variant::ALL {
+                if v.uses_short_stack() {
+                    all.extend([1, 2, 3, 8].map(|n| Traversal { variant: v, stack_size: n, any_hit: false }));
+                } else {
+                    all.push(Traversal::closest(v));
+                }
+            }
+            all
+        }
+    };
+    let (scene, tree) = load_and_build(&args.scene)?;
+    let ctx = context()?;
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    let camera = default_camera(&args.scene, &scene)?;
+    let batches = [
+        ("camera", kdtrace::render::camera_rays(&camera, args.width, args.height)),
+        ("random", kdtrace::raygen::random_rays(&scene.bounds, args.random, 1)),
+    ];
+    println!(
+        "# kdtrace bench {} — {} triangles, {} nodes, on {}",
+        args.scene.display(),
+        scene.triangles.len(),
+        tree.nodes.len(),
+        ctx.info
+    );
+    for (kind, rays) in &batches {
+        if rays.is_empty() {
+            continue;
+        }
+        let bar = spinner(format!("{kind} rays"));
+        let rows = kdtrace::bench::compare_traversals(
+            &mut tracer,
+            &scene,
+            rays,
+            &traversals,
+            args.repeat,
+            args.reference_sample,
+            |what| bar.set_message(format!("{kind} rays: {what}")),
+        )?;
+        bar.finish_and_clear();
+        println!("\n## {} {kind} rays (GPU timestamps, median of {})\n", rays.len(), args.repeat.max(1));
+        print!("{}", kdtrace::bench::markdown_table(&rows));
     }
     Ok(())
 }
@@ -329,6 +484,7 @@ fn main() -> Result<()> {
         Command::Trace(a) => trace(a),
         Command::Stats(a) => stats(a),
         Command::Rays(a) => rays(a),
+        Command::Bench(a) => bench(a),
         Command::Info => info(),
     }
 }

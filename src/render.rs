@@ -63,3 +63,19 @@ pub fn to_image(colors: &[Vec3], width: u32, height: u32) -> image::RgbImage {
         image::Rgb([encode(c.x), encode(c.y), encode(c.z)])
     })
 }
+
+/// A per-pixel cost image: `values` mapped through a blue–red–yellow ramp scaled
+/// to the largest value. Returns the image, the maximum and the mean.
+pub fn heatmap(values: &[u32], width: u32, height: u32) -> (image::RgbImage, u32, f64) {
+    let max = values.iter().copied().max().unwrap_or(0).max(1);
+    let mean = values.iter().map(|&v| v as f64).sum::<f64>() / values.len().max(1) as f64;
+    let ramp = |x: f32| -> [u8; 3] {
+        let x = x.clamp(0.0, 1.0);
+        let (r, g, b) = if x < 0.5 { (2.0 * x, 0.0, 1.0 - 2.0 * x) } else { (1.0, 2.0 * (x - 0.5), 0.0) };
+        [(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8]
+    };
+    let image = image::RgbImage::from_fn(width, height, |x, y| {
+        image::Rgb(ramp(values[(y * width + x) as usize] as f32 / max as f32))
+    });
+    (image, max, mean)
+}

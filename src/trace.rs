@@ -8,14 +8,15 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    BINDING_COUNTERS, COUNTERS_PER_RAY, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS,
-    COUNTER_TRIANGLES, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, TRACE_WORKGROUP_SIZE,
+    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
+    MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
 use crate::gpu::{shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::kdtree::traverse::{Counters, Variant};
-use crate::kdtree::KdTree;
+use crate::kdtree::links::TreeLinks;
+use crate::kdtree::traverse::{Counters, Traversal, Variant};
+use crate::kdtree::{KdNode, KdTree};
 
 /// Push constants of `trace.comp` (`TraceParams` in glsl/shared/ray.glsl).
 #[repr(C)]
@@ -30,14 +31,22 @@ pub struct TraceParams {
 /// Options of one `trace` call.
 #[derive(Clone, Copy, Debug)]
 pub struct TraceOptions {
-    pub variant: Variant,
+    /// Variant, short-stack size and closest/any-hit mode (specialization constants).
+    pub traversal: Traversal,
     /// Write per-ray counters (a specialization constant: no cost when off).
     pub counters: bool,
 }
 
 impl Default for TraceOptions {
     fn default() -> Self {
-        TraceOptions { variant: Variant::Stack, counters: false }
+        TraceOptions { traversal: Traversal::closest(Variant::Stack), counters: false }
+    }
+}
+
+impl TraceOptions {
+    /// Closest hit with `variant` (short stack of 3), counters off.
+    pub fn variant(variant: Variant) -> Self {
+        TraceOptions { traversal: Traversal::closest(variant), counters: false }
     }
 }
 
@@ -62,7 +71,13 @@ pub struct Tracer {
     prim_indices: Buffer,
     triangles: Buffer,
     bounds: Aabb,
-    kernels: Vec<((Variant, bool), Kernel)>,
+    /// The nodes, kept to build the side buffers if a variant needs them.
+    host_nodes: Vec<KdNode>,
+    /// Parent links, node boxes and ropes, uploaded on first use by `backtrack`/`ropes`.
+    links: Option<[Buffer; 3]>,
+    /// Bound in place of side buffers a variant does not read.
+    dummy: Buffer,
+    kernels: Vec<((Traversal, bool), Kernel)>,
     chunk: usize,
 }
 
@@ -91,13 +106,25 @@ impl Tracer {
         let nodes = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), usage, "kd-tree nodes")?;
         let prim_indices = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?;
         let triangles = Buffer::with_data(ctx, bytemuck::cast_slice(&verts), usage, "triangle vertices")?;
+        let dummy = Buffer::new(ctx, 4, usage, MemoryLocation::GpuOnly, "unused side buffer")?;
         // Rays (32 B), hits (16 B) and counters per chunk must fit the storage range,
         // and the dispatch must fit the workgroup count limit.
         let per_ray = (COUNTERS_PER_RAY * 4) as u64;
         let by_range = (limit / per_ray.max(32)) as usize;
         let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
         let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
-        Ok(Tracer { ctx: ctx.clone(), nodes, prim_indices, triangles, bounds: tree.bounds, kernels: Vec::new(), chunk })
+        Ok(Tracer {
+            ctx: ctx.clone(),
+            nodes,
+            prim_indices,
+            triangles,
+            bounds: tree.bounds,
+            host_nodes: tree.nodes.clone(),
+            links: None,
+            dummy,
+            kernels: Vec::new(),
+            chunk,
+        })
     }
 
     /// The context this tracer runs on.
@@ -115,8 +142,36 @@ impl Tracer {
         self.chunk = rays.clamp(1, self.chunk.max(1));
     }
 
-    fn kernel(&mut self, variant: Variant, counters: bool) -> Result<usize> {
-        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (variant, counters)) {
+    /// Uploads the side buffers of `backtrack` and `ropes` once.
+    fn ensure_links(&mut self) -> Result<()> {
+        if self.links.is_some() {
+            return Ok(());
+        }
+        let links = TreeLinks::new(&self.host_nodes, self.bounds);
+        let limit = self.ctx.info.max_storage_buffer_range;
+        if std::mem::size_of_val(links.boxes.as_slice()) as u64 > limit {
+            return Err(Error::DeviceLimit(format!(
+                "the node boxes take {} bytes; the device allows {limit} per storage buffer",
+                std::mem::size_of_val(links.boxes.as_slice())
+            )));
+        }
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        self.links = Some([
+            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.parents), usage, "parents")?,
+            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.boxes), usage, "node boxes")?,
+            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.ropes), usage, "ropes")?,
+        ]);
+        Ok(())
+    }
+
+    fn kernel(&mut self, traversal: Traversal, counters: bool) -> Result<usize> {
+        traversal.validate()?;
+        // Variants that ignore the stack size share one pipeline.
+        let key = Traversal {
+            stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
+            ..traversal
+        };
+        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (key, counters)) {
             return Ok(i);
         }
         let kernel = Kernel::new(
@@ -124,14 +179,14 @@ impl Tracer {
             &KernelDesc {
                 name: "trace",
                 spirv: shaders::TRACE,
-                bindings: BINDING_COUNTERS + 1,
+                bindings: TRACE_BINDINGS,
                 push_constant_size: std::mem::size_of::<TraceParams>() as u32,
-                spec_constants: &[variant.id(), counters as u32],
+                spec_constants: &[key.variant.id(), counters as u32, key.stack_size, key.any_hit as u32],
                 workgroup_size: TRACE_WORKGROUP_SIZE,
                 required_subgroup_size: None,
             },
         )?;
-        self.kernels.push(((variant, counters), kernel));
+        self.kernels.push(((key, counters), kernel));
         Ok(self.kernels.len() - 1)
     }
 
@@ -148,7 +203,10 @@ impl Tracer {
         options: &TraceOptions,
         mut progress: impl FnMut(usize),
     ) -> Result<TraceResult> {
-        let kernel_index = self.kernel(options.variant, options.counters)?;
+        let kernel_index = self.kernel(options.traversal, options.counters)?;
+        if options.traversal.variant.uses_links() {
+            self.ensure_links()?;
+        }
         let chunk = self.chunk.min(rays.len()).max(1);
         let ctx = self.ctx.clone();
         let mut ray_buf = Buffer::new(
@@ -174,10 +232,24 @@ impl Tracer {
             "counters",
         )?;
         let kernel = &self.kernels[kernel_index].1;
+        let [parents, boxes, ropes] = match (&self.links, options.traversal.variant.uses_links()) {
+            (Some([p, b, r]), true) => [p, b, r],
+            _ => [&self.dummy; 3],
+        };
         let set = BufferSet::new(
             &ctx,
             kernel,
-            &[&self.nodes, &self.prim_indices, &self.triangles, &ray_buf, &hit_buf, &counter_buf],
+            &[
+                &self.nodes,
+                &self.prim_indices,
+                &self.triangles,
+                &ray_buf,
+                &hit_buf,
+                &counter_buf,
+                parents,
+                boxes,
+                ropes,
+            ],
         )?;
         let timestamps = Timestamps::new(&ctx, 2)?;
 
@@ -240,6 +312,7 @@ impl Tracer {
                     triangles: c[COUNTER_TRIANGLES as usize],
                     restarts: c[COUNTER_RESTARTS as usize],
                     steps: c[COUNTER_STEPS as usize],
+                    drops: c[COUNTER_DROPS as usize],
                 }));
             }
             progress(result.hits.len());

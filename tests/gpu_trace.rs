@@ -6,7 +6,8 @@ mod common;
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use glam::Vec3;
 use kdtrace::consts::{PRIM_INVALID, PRIM_MISS};
-use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Variant};
+use kdtrace::kdtree::links::TreeLinks;
+use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::reference::{agrees, Agreement};
 use kdtrace::render::camera_rays;
@@ -21,10 +22,24 @@ fn same_bits(a: &Hit, b: &Hit) -> bool {
         && a.v.to_bits() == b.v.to_bits()
 }
 
+/// Every traversal the kernel can be specialized to: all variants, short stacks of 1..=8.
+fn all_traversals() -> Vec<Traversal> {
+    let mut all = Vec::new();
+    for variant in Variant::ALL {
+        if variant.uses_short_stack() {
+            all.extend([1, 2, 3, 5, 8].map(|stack_size| Traversal { variant, stack_size, any_hit: false }));
+        } else {
+            all.push(Traversal::closest(variant));
+        }
+    }
+    all
+}
+
 fn check_scene(name: &str, random: usize) {
     let path = scene_path(name);
     let scene = Scene::load(&path).unwrap();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let links = TreeLinks::new(&tree.nodes, tree.bounds);
     let ctx = context();
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
 
@@ -39,50 +54,80 @@ fn check_scene(name: &str, random: usize) {
     let away = scene.bounds.max + scene.bounds.extent();
     rays.extend((0..64).map(|_| Ray::new(away, rng.unit_vector().abs() + Vec3::splat(0.01), 0.0, f32::INFINITY)));
 
-    let cpu_scene = SceneRef {
-        nodes: &tree.nodes,
-        prim_indices: &tree.prim_indices,
-        triangles: &scene.triangles,
-        bounds: tree.bounds,
-    };
-    for variant in Variant::ALL {
-        let gpu = tracer.trace(&rays, &TraceOptions { variant, counters: true }).unwrap();
-        let gpu_counters = gpu.counters.as_ref().unwrap();
-        let mut hits = 0;
-        let mut grazing = 0;
-        let mut disagreements = Vec::new();
-        for (i, ray) in rays.iter().enumerate() {
-            let (cpu_hit, cpu_counters) = trace_ray(&cpu_scene, ray, variant);
+    let cpu_scene = SceneRef::new(&tree, &scene.triangles).with_links(&links);
+    let mut baseline: Option<Vec<Hit>> = None;
+    for traversal in all_traversals() {
+        for any_hit in [false, true] {
+            let traversal = Traversal { any_hit, ..traversal };
+            let gpu = tracer.trace(&rays, &TraceOptions { traversal, counters: true }).unwrap();
+            let gpu_counters = gpu.counters.as_ref().unwrap();
+            let mut hits = 0;
+            let mut grazing = 0;
+            let mut disagreements = Vec::new();
+            for (i, ray) in rays.iter().enumerate() {
+                let (cpu_hit, cpu_counters) = trace_ray(&cpu_scene, ray, traversal);
+                assert!(
+                    same_bits(&gpu.hits[i], &cpu_hit),
+                    "{name} {traversal:?} ray {i} {ray:?}: GPU {:?} != CPU {:?}",
+                    gpu.hits[i],
+                    cpu_hit
+                );
+                assert_eq!(gpu_counters[i], cpu_counters, "{name} {traversal:?} ray {i}: counters differ");
+                hits += cpu_hit.is_hit() as usize;
+                let stack_hit = baseline.as_ref().map(|b| b[i]);
+                match (any_hit, stack_hit) {
+                    (false, None) => match agrees(&scene.triangles, ray, &cpu_hit) {
+                        Agreement::Disagree(why) => disagreements.push(format!("ray {i} {ray:?}: {why}")),
+                        Agreement::Grazing => grazing += 1,
+                        _ => {}
+                    },
+                    (false, Some(stack)) => {
+                        // Same t bit for bit; a different primitive only in an exact tie.
+                        assert_eq!(
+                            cpu_hit.t.to_bits(),
+                            stack.t.to_bits(),
+                            "{name} {traversal:?} ray {i}: t differs from stack"
+                        );
+                        if cpu_hit.prim_id != stack.prim_id {
+                            let [v0, v1, v2] = scene.triangles[stack.prim_id as usize];
+                            let wr = kdtrace::geom::WatertightRay::new(ray.origin.into(), ray.dir.into());
+                            let t = wr.intersect(v0, v1, v2, ray.tmin, ray.tmax).map(|h| h.0);
+                            assert_eq!(t, Some(cpu_hit.t), "{name} {traversal:?} ray {i}: not a tie");
+                        }
+                    }
+                    (true, Some(stack)) => {
+                        // An occluder is reported exactly when the closest hit exists, and it is a real hit.
+                        assert_eq!(cpu_hit.is_hit(), stack.is_hit(), "{name} {traversal:?} ray {i}: any-hit status");
+                        if cpu_hit.is_hit() {
+                            let [v0, v1, v2] = scene.triangles[cpu_hit.prim_id as usize];
+                            let wr = kdtrace::geom::WatertightRay::new(ray.origin.into(), ray.dir.into());
+                            assert!(wr.intersect(v0, v1, v2, ray.tmin, ray.tmax).is_some());
+                        }
+                    }
+                    (true, None) => unreachable!("closest-hit stack runs first"),
+                }
+            }
+            let tail = &gpu.hits[rays.len() - 64..];
+            assert!(tail.iter().all(|h| h.prim_id == PRIM_MISS), "{name}: rays pointing away must miss");
+            assert!(hits > rays.len() / 10, "{name} {traversal:?}: only {hits} of {} rays hit", rays.len());
             assert!(
-                same_bits(&gpu.hits[i], &cpu_hit),
-                "{name} {variant:?} ray {i} {ray:?}: GPU {:?} != CPU {:?}",
-                gpu.hits[i],
-                cpu_hit
+                disagreements.is_empty(),
+                "{name} {traversal:?}: {} of {} rays disagree with the float64 reference:\n{}",
+                disagreements.len(),
+                rays.len(),
+                disagreements.iter().take(10).cloned().collect::<Vec<_>>().join("\n")
             );
-            assert_eq!(gpu_counters[i], cpu_counters, "{name} {variant:?} ray {i}: counters differ");
-            hits += cpu_hit.is_hit() as usize;
-            match agrees(&scene.triangles, ray, &cpu_hit) {
-                Agreement::Disagree(why) => disagreements.push(format!("ray {i} {ray:?}: {why}")),
-                Agreement::Grazing => grazing += 1,
-                _ => {}
+            assert!(grazing * 1000 <= rays.len(), "{name} {traversal:?}: {grazing} grazing disagreements is too many");
+            if baseline.is_none() {
+                eprintln!(
+                    "{name} stack: {} rays, {hits} hits; float64 reference: {grazing} grazing, 0 wrong",
+                    rays.len()
+                );
+                baseline = Some(gpu.hits.clone());
             }
         }
-        let tail = &gpu.hits[rays.len() - 64..];
-        assert!(tail.iter().all(|h| h.prim_id == PRIM_MISS), "{name}: rays pointing away must miss");
-        assert!(hits > rays.len() / 10, "{name} {variant:?}: only {hits} of {} rays hit", rays.len());
-        assert!(
-            disagreements.is_empty(),
-            "{name} {variant:?}: {} of {} rays disagree with the float64 reference:\n{}",
-            disagreements.len(),
-            rays.len(),
-            disagreements.iter().take(10).cloned().collect::<Vec<_>>().join("\n")
-        );
-        assert!(grazing * 1000 <= rays.len(), "{name} {variant:?}: {grazing} grazing disagreements is too many");
-        eprintln!(
-            "{name} {variant:?}: {} rays, {hits} hits, GPU == CPU twin; float64 reference: {grazing} grazing, 0 wrong",
-            rays.len()
-        );
     }
+    eprintln!("{name}: every traversal (closest and any-hit) equals its CPU twin and the stack baseline");
     drop(tracer);
     assert_validation_clean(&ctx);
 }

@@ -21,7 +21,15 @@ struct TraceCounters {
     uint triangles;
     uint restarts;
     uint steps;
+    uint drops;
 };
+
+// Fetches a node, counting the visit and the loop step.
+uvec2 fetch_node(uint node, inout TraceCounters c) {
+    c.steps += 1u;
+    c.nodes += 1u;
+    return nodes[node];
+}
 
 // Clip [ray.tmin, ray.tmax] to the scene box (slab test). A zero direction
 // component constrains nothing unless the origin lies outside that slab.
@@ -73,12 +81,14 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, bool ti
     return VISIT_BOTH;
 }
 
-// Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t).
-// Returns false when the driver cut the loop short (see trace.comp).
+// Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t);
+// any-hit mode stops at the first hit. Returns false when the driver cut the
+// loop short (see trace.comp).
 bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) {
     uint count = node_prim_count(n);
     uint offset = node_prim_offset(n);
     uint i = 0u;
+    bool stopped = false;
     for (; i < count; ++i) {
         uint prim = prim_indices[offset + i];
         uint base = prim * 9u;
@@ -91,10 +101,45 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
             best.prim_id = prim;
             best.u = u;
             best.v = v;
+            if (ANY_HIT) {
+                stopped = true;
+                break;
+            }
         }
     }
-    c.triangles += count;
-    return i == count;
+    c.triangles += stopped ? i + 1u : count;
+    return stopped || i == count;
+}
+
+// Visits a leaf whose segment ends at t1.
+#define LEAF_GO_ON 0u   // no hit that ends traversal: go on behind the leaf
+#define LEAF_DONE 1u    // any-hit found one, or the closest hit lies inside the leaf
+#define LEAF_CUT 2u     // the driver cut the leaf loop short
+uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounters c) {
+    c.leaves += 1u;
+    if (!intersect_leaf(r, n, best, c)) return LEAF_CUT;
+    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best.t <= t1;
+    return done ? LEAF_DONE : LEAF_GO_ON;
+}
+
+// Distance at which the ray leaves a node box (side buffer node_boxes): the
+// nearest far plane; `face` is 2*axis (+1 for the max face). Axes with a zero
+// direction component never end the segment.
+float box_exit(TraceRay r, uint node, out uint face) {
+    float t_exit = uintBitsToFloat(0x7f800000u);
+    face = 0u;
+    for (uint axis = 0u; axis < 3u; ++axis) {
+        float d = r.dir[axis];
+        if (d == 0.0) continue;
+        bool positive = d > 0.0;
+        float plane = node_boxes[node * 6u + axis + (positive ? 3u : 0u)];
+        precise float t = (plane - r.origin[axis]) * r.inv_dir[axis];
+        if (t < t_exit) {
+            t_exit = t;
+            face = 2u * axis + (positive ? 1u : 0u);
+        }
+    }
+    return t_exit;
 }
 
 #endif

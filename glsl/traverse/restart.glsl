@@ -1,6 +1,6 @@
 // `restart`: kd-restart (Foley & Sugerman 2005), no stack. After a leaf without
 // a hit inside it, the segment becomes [leaf exit, scene exit] and descent starts
-// again at the root. Progress: after the first descent, ties at t0 go to the far
+// again at the root. Progress: after the first restart, ties at t0 go to the far
 // child, so every leaf reached ends strictly after t0.
 // CPU twin: `trace_restart` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_RESTART_GLSL
@@ -9,15 +9,13 @@
 bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
     uint node = 0u;
     float t1 = t1_scene;
-    bool first_descent = true;
+    bool ties_go_far = false;
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
-        c.steps += 1u;
-        c.nodes += 1u;
-        uvec2 n = nodes[node];
+        uvec2 n = fetch_node(node, c);
         if (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, !first_descent, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
@@ -30,14 +28,14 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout T
             }
             continue;
         }
-        c.leaves += 1u;
-        if (!intersect_leaf(r, n, best, c)) return false;
-        if (best.t <= t1 || t1 >= t1_scene) return true;
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
         // Restart from the root behind this leaf.
         t0 = t1;
         t1 = min(t1_scene, best.t);
         node = 0u;
-        first_descent = false;
+        ties_go_far = true;
         c.restarts += 1u;
     }
     return false;

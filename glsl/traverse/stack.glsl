@@ -12,9 +12,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
     uint sp = 0u;
     uint node = 0u;
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
-        c.steps += 1u;
-        c.nodes += 1u;
-        uvec2 n = nodes[node];
+        uvec2 n = fetch_node(node, c);
         if (!node_is_leaf(n)) {
             uint near, far;
             float ts;
@@ -33,11 +31,9 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
             }
             continue;
         }
-        // Leaf: a hit inside the leaf's interval is the closest one.
-        c.leaves += 1u;
-        if (!intersect_leaf(r, n, best, c)) return false;
-        if (best.t <= t1) return true;
-        if (sp == 0u) return true;
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE || sp == 0u) return true;
         --sp;
         node = stack_node[sp];
         t0 = stack_t0[sp];

@@ -1,4 +1,5 @@
 //! The kd-tree: node layout, builder, CPU traversals.
+pub mod links;
 pub mod node;
 pub use node::KdNode;
 pub mod build;

@@ -4,56 +4,147 @@
 
 use glam::Vec3;
 
+use super::links::{TreeLinks, NO_ROPE};
 use super::KdNode;
-use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
+use crate::consts::{MAX_SHORT_STACK, MAX_STACK, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
 use crate::geom::{Aabb, Hit, Ray, WatertightRay};
 
-/// The traversal algorithms (specialization constant `VARIANT` of `trace.comp`).
+/// The traversal algorithms (specialization constant `VARIANT` of `trace.comp`),
+/// each in its own file under `glsl/traverse/` with its twin below.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Variant {
     /// Full per-ray stack, front to back (pbrt-v3). The baseline.
     Stack,
     /// kd-restart (Foley & Sugerman 2005): no stack, restart at the root behind each leaf.
     Restart,
+    /// kd-restart from the push-down node (Horn et al. 2007): the deepest node whose
+    /// segment lay wholly in one child.
+    PushDown,
+    /// A short stack of `stack_size` entries that drops its oldest entry when full,
+    /// with kd-restart from the root when it runs empty (Horn et al. 2007).
+    ShortStack,
+    /// Short stack plus push-down: the paper's best variant.
+    PushDownShortStack,
+    /// kd-backtrack (Foley & Sugerman 2005): climb parent links to the first
+    /// ancestor whose box the ray leaves after the current leaf, then descend.
+    Backtrack,
+    /// Ropes (Popov et al. 2007): each leaf links its six faces to the neighbouring
+    /// subtree; the ray walks from leaf to leaf without a stack.
+    Ropes,
 }
 
 impl Variant {
-    pub const ALL: [Variant; 2] = [Variant::Stack, Variant::Restart];
+    pub const ALL: [Variant; 7] = [
+        Variant::Stack,
+        Variant::Restart,
+        Variant::PushDown,
+        Variant::ShortStack,
+        Variant::PushDownShortStack,
+        Variant::Backtrack,
+        Variant::Ropes,
+    ];
 
     /// The value of the `VARIANT` specialization constant.
     pub fn id(self) -> u32 {
+        use crate::consts::*;
         match self {
-            Variant::Stack => crate::consts::VARIANT_STACK,
-            Variant::Restart => crate::consts::VARIANT_RESTART,
+            Variant::Stack => VARIANT_STACK,
+            Variant::Restart => VARIANT_RESTART,
+            Variant::PushDown => VARIANT_PUSH_DOWN,
+            Variant::ShortStack => VARIANT_SHORT_STACK,
+            Variant::PushDownShortStack => VARIANT_PUSH_DOWN_SHORT_STACK,
+            Variant::Backtrack => VARIANT_BACKTRACK,
+            Variant::Ropes => VARIANT_ROPES,
         }
     }
 
+    /// The name used on the command line.
     pub fn name(self) -> &'static str {
         match self {
             Variant::Stack => "stack",
             Variant::Restart => "restart",
+            Variant::PushDown => "push-down",
+            Variant::ShortStack => "short-stack",
+            Variant::PushDownShortStack => "push-down-short-stack",
+            Variant::Backtrack => "backtrack",
+            Variant::Ropes => "ropes",
         }
+    }
+
+    /// True for the variants whose behaviour depends on the short-stack size.
+    pub fn uses_short_stack(self) -> bool {
+        matches!(self, Variant::ShortStack | Variant::PushDownShortStack)
+    }
+
+    /// True for the variants that read the side buffers of [`TreeLinks`].
+    pub fn uses_links(self) -> bool {
+        matches!(self, Variant::Backtrack | Variant::Ropes)
+    }
+}
+
+impl std::fmt::Display for Variant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
 impl std::str::FromStr for Variant {
     type Err = crate::Error;
     fn from_str(s: &str) -> crate::Result<Self> {
-        Variant::ALL
-            .into_iter()
-            .find(|v| v.name() == s)
-            .ok_or_else(|| crate::Error::InvalidInput(format!("unknown traversal '{s}' (stack, restart)")))
+        Variant::ALL.into_iter().find(|v| v.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Variant::ALL.iter().map(|v| v.name()).collect();
+            crate::Error::InvalidInput(format!("unknown traversal '{s}' ({})", names.join(", ")))
+        })
+    }
+}
+
+/// A traversal as the kernel's specialization constants select it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Traversal {
+    pub variant: Variant,
+    /// Short-stack entries, 1..=`MAX_SHORT_STACK` (used by the short-stack variants).
+    pub stack_size: u32,
+    /// Any-hit (shadow-ray) mode: stop at the first hit in [tmin, tmax], not the closest.
+    pub any_hit: bool,
+}
+
+impl Traversal {
+    /// Closest hit with `variant` and the paper's short stack of 3.
+    pub fn closest(variant: Variant) -> Self {
+        Traversal { variant, stack_size: 3, any_hit: false }
+    }
+
+    /// Checks the stack size.
+    pub fn validate(&self) -> crate::Result<()> {
+        if self.stack_size == 0 || self.stack_size > MAX_SHORT_STACK {
+            return Err(crate::Error::InvalidInput(format!(
+                "short-stack size {} is outside 1..={MAX_SHORT_STACK}",
+                self.stack_size
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl From<Variant> for Traversal {
+    fn from(variant: Variant) -> Self {
+        Traversal::closest(variant)
     }
 }
 
 /// Per-ray counters, as written by the GPU when counters are on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Counters {
+    /// Node fetches (interior and leaf), climbs of kd-backtrack included.
     pub nodes: u32,
     pub leaves: u32,
     pub triangles: u32,
+    /// Restarts (kd-restart, push-down, short stack running empty), backtracks or rope hops.
     pub restarts: u32,
+    /// Traversal loop iterations.
     pub steps: u32,
+    /// Short-stack entries dropped because the stack was full.
+    pub drops: u32,
 }
 
 /// What a traversal needs: the tree, the triangles it indexes and the scene box.
@@ -63,6 +154,20 @@ pub struct SceneRef<'a> {
     pub prim_indices: &'a [u32],
     pub triangles: &'a [[Vec3; 3]],
     pub bounds: Aabb,
+    /// Side buffers; needed by `Backtrack` and `Ropes` only.
+    pub links: Option<&'a TreeLinks>,
+}
+
+impl<'a> SceneRef<'a> {
+    /// A view of `tree` over `triangles`, without side buffers.
+    pub fn new(tree: &'a super::KdTree, triangles: &'a [[Vec3; 3]]) -> Self {
+        SceneRef { nodes: &tree.nodes, prim_indices: &tree.prim_indices, triangles, bounds: tree.bounds, links: None }
+    }
+
+    /// The same view with side buffers.
+    pub fn with_links(self, links: &'a TreeLinks) -> Self {
+        SceneRef { links: Some(links), ..self }
+    }
 }
 
 struct TraceRay {
@@ -72,6 +177,7 @@ struct TraceRay {
     inv_dir: Vec3,
     tmin: f32,
     tmax: f32,
+    any_hit: bool,
 }
 
 #[derive(PartialEq, Eq)]
@@ -83,8 +189,13 @@ enum Visit {
     BothSame,
 }
 
-/// Traces one ray with `variant`: the CPU twin of `trace.comp`'s `main`.
-pub fn trace_ray(scene: &SceneRef, ray: &Ray, variant: Variant) -> (Hit, Counters) {
+/// Traces one ray: the CPU twin of `trace.comp`'s `main`. `traversal` may be a
+/// plain [`Variant`] (closest hit, short stack of 3).
+///
+/// # Panics
+/// When `Backtrack` or `Ropes` is asked for on a `SceneRef` without links.
+pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -> (Hit, Counters) {
+    let traversal = traversal.into();
     let mut best = Hit { t: ray.tmax, prim_id: PRIM_MISS, u: 0.0, v: 0.0 };
     let mut c = Counters::default();
     if !ray.is_valid() {
@@ -99,11 +210,20 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, variant: Variant) -> (Hit, Counter
             inv_dir: Vec3::ONE / dir,
             tmin: ray.tmin,
             tmax: ray.tmax,
+            any_hit: traversal.any_hit,
         };
         if let Some((t0, t1)) = clip_to_box(&r, &scene.bounds) {
-            let finished = match variant {
-                Variant::Stack => trace_stack(scene, &r, t0, t1, &mut best, &mut c),
-                Variant::Restart => trace_restart(scene, &r, t0, t1, &mut best, &mut c),
+            let mut s = State { scene, r: &r, best: &mut best, c: &mut c };
+            let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
+            let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
+            let finished = match traversal.variant {
+                Variant::Stack => trace_stack(&mut s, t0, t1),
+                Variant::Restart => trace_restart(&mut s, t0, t1),
+                Variant::PushDown => trace_push_down(&mut s, t0, t1),
+                Variant::ShortStack => trace_short_stack(&mut s, t0, t1, size, false),
+                Variant::PushDownShortStack => trace_short_stack(&mut s, t0, t1, size, true),
+                Variant::Backtrack => trace_backtrack(&mut s, links(), t0, t1),
+                Variant::Ropes => trace_ropes(&mut s, links(), t0, t1),
             };
             if !finished {
                 best.prim_id = PRIM_INCOMPLETE;
@@ -116,6 +236,35 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, variant: Variant) -> (Hit, Counter
         best.v = 0.0;
     }
     (best, c)
+}
+
+/// What every variant carries: the scene, the ray, the best hit and the counters.
+struct State<'s, 'a> {
+    scene: &'s SceneRef<'a>,
+    r: &'s TraceRay,
+    best: &'s mut Hit,
+    c: &'s mut Counters,
+}
+
+impl State<'_, '_> {
+    /// Fetches a node, counting the visit and the loop step.
+    fn fetch(&mut self, node: u32) -> KdNode {
+        self.c.steps += 1;
+        self.c.nodes += 1;
+        self.scene.nodes[node as usize]
+    }
+
+    /// Tests a leaf; true when traversal is done: an any-hit found one, or the
+    /// closest hit lies inside the leaf's segment (which ends at `t1`).
+    fn leaf(&mut self, n: KdNode, t1: f32) -> bool {
+        self.c.leaves += 1;
+        intersect_leaf(self.scene, self.r, n, self.best, self.c);
+        if self.r.any_hit {
+            self.best.prim_id != PRIM_MISS
+        } else {
+            self.best.t <= t1
+        }
+    }
 }
 
 /// 1 + 2·gamma(3) with gamma(n) = n·u / (1 - n·u), u = 2^-24, rounded up: 1 + 3·2^-23
@@ -183,30 +332,32 @@ fn decide_children(r: &TraceRay, index: u32, n: KdNode, t0: f32, t1: f32, ties_g
     (visit, near, far, ts)
 }
 
-/// Twin of `intersect_leaf` in common.glsl.
+/// Twin of `intersect_leaf` in common.glsl. Any-hit mode stops at the first hit.
 fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, c: &mut Counters) {
     let offset = n.prim_offset() as usize;
     let count = n.prim_count() as usize;
-    for &prim in &scene.prim_indices[offset..offset + count] {
+    for (i, &prim) in scene.prim_indices[offset..offset + count].iter().enumerate() {
         let [v0, v1, v2] = scene.triangles[prim as usize];
         if let Some((t, u, v)) = r.wr.intersect(v0, v1, v2, r.tmin, best.t) {
             *best = Hit { t, prim_id: prim, u, v };
+            if r.any_hit {
+                c.triangles += i as u32 + 1;
+                return;
+            }
         }
     }
     c.triangles += count as u32;
 }
 
 /// Twin of `trace_stack` in glsl/traverse/stack.glsl.
-fn trace_stack(scene: &SceneRef, r: &TraceRay, mut t0: f32, mut t1: f32, best: &mut Hit, c: &mut Counters) -> bool {
+fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     let mut stack = [(0u32, 0f32, 0f32); MAX_STACK as usize];
     let mut sp = 0usize;
     let mut node = 0u32;
     for _ in 0..MAX_TRAVERSAL_STEPS {
-        c.steps += 1;
-        c.nodes += 1;
-        let n = scene.nodes[node as usize];
+        let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(r, node, n, t0, t1, false);
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, false);
             match visit {
                 Visit::Near => node = near,
                 Visit::Far => node = far,
@@ -224,9 +375,7 @@ fn trace_stack(scene: &SceneRef, r: &TraceRay, mut t0: f32, mut t1: f32, best: &
             }
             continue;
         }
-        c.leaves += 1;
-        intersect_leaf(scene, r, n, best, c);
-        if best.t <= t1 || sp == 0 {
+        if s.leaf(n, t1) || sp == 0 {
             return true;
         }
         sp -= 1;
@@ -236,16 +385,14 @@ fn trace_stack(scene: &SceneRef, r: &TraceRay, mut t0: f32, mut t1: f32, best: &
 }
 
 /// Twin of `trace_restart` in glsl/traverse/restart.glsl.
-fn trace_restart(scene: &SceneRef, r: &TraceRay, mut t0: f32, t1_scene: f32, best: &mut Hit, c: &mut Counters) -> bool {
+fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut first_descent = true;
+    let mut ties_go_far = false;
     for _ in 0..MAX_TRAVERSAL_STEPS {
-        c.steps += 1;
-        c.nodes += 1;
-        let n = scene.nodes[node as usize];
+        let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(r, node, n, t0, t1, !first_descent);
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
@@ -256,16 +403,223 @@ fn trace_restart(scene: &SceneRef, r: &TraceRay, mut t0: f32, t1_scene: f32, bes
             }
             continue;
         }
-        c.leaves += 1;
-        intersect_leaf(scene, r, n, best, c);
-        if best.t <= t1 || t1 >= t1_scene {
+        if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
         t0 = t1;
-        t1 = glsl_min(t1_scene, best.t);
+        t1 = glsl_min(t1_scene, s.best.t);
         node = 0;
-        first_descent = false;
-        c.restarts += 1;
+        ties_go_far = true;
+        s.c.restarts += 1;
+    }
+    false
+}
+
+/// Twin of `trace_push_down` in glsl/traverse/push_down.glsl.
+fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
+    let mut node = 0u32;
+    let mut t1 = t1_scene;
+    let mut ties_go_far = false;
+    let mut restart_node = 0u32;
+    let mut push_down = true;
+    for _ in 0..MAX_TRAVERSAL_STEPS {
+        let n = s.fetch(node);
+        if !n.is_leaf() {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            match visit {
+                Visit::Far => node = far,
+                Visit::Near => node = near,
+                Visit::Both => {
+                    node = near;
+                    t1 = ts;
+                    push_down = false;
+                }
+                Visit::BothSame => {
+                    node = near;
+                    push_down = false;
+                }
+            }
+            if push_down {
+                restart_node = node;
+            }
+            continue;
+        }
+        if s.leaf(n, t1) || t1 >= t1_scene {
+            return true;
+        }
+        t0 = t1;
+        t1 = glsl_min(t1_scene, s.best.t);
+        node = restart_node;
+        push_down = true;
+        ties_go_far = true;
+        s.c.restarts += 1;
+    }
+    false
+}
+
+/// Twin of `trace_short_stack` in glsl/traverse/short_stack.glsl: a ring buffer of
+/// `size` entries; a push onto a full stack overwrites the oldest entry.
+fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use_push_down: bool) -> bool {
+    let mut stack = [(0u32, 0f32, 0f32); MAX_SHORT_STACK as usize];
+    let mut head = 0usize; // next slot to write
+    let mut count = 0usize;
+    let mut node = 0u32;
+    let mut t1 = t1_scene;
+    let mut ties_go_far = false;
+    let mut restart_node = 0u32;
+    let mut push_down = use_push_down;
+    for _ in 0..MAX_TRAVERSAL_STEPS {
+        let n = s.fetch(node);
+        if !n.is_leaf() {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            let mut push = |entry: (u32, f32, f32), c: &mut Counters| {
+                if count == size {
+                    c.drops += 1;
+                } else {
+                    count += 1;
+                }
+                stack[head] = entry;
+                head = (head + 1) % size;
+            };
+            match visit {
+                Visit::Far => node = far,
+                Visit::Near => node = near,
+                Visit::Both => {
+                    push((far, ts, t1), s.c);
+                    node = near;
+                    t1 = ts;
+                    push_down = false;
+                }
+                Visit::BothSame => {
+                    push((far, t0, t1), s.c);
+                    node = near;
+                    push_down = false;
+                }
+            }
+            if push_down {
+                restart_node = node;
+            }
+            continue;
+        }
+        if s.leaf(n, t1) {
+            return true;
+        }
+        if count > 0 {
+            head = (head + size - 1) % size;
+            count -= 1;
+            (node, t0, t1) = stack[head];
+            continue;
+        }
+        if t1 >= t1_scene {
+            return true;
+        }
+        t0 = t1;
+        t1 = glsl_min(t1_scene, s.best.t);
+        node = restart_node;
+        push_down = use_push_down;
+        ties_go_far = true;
+        s.c.restarts += 1;
+    }
+    false
+}
+
+/// Exit distance of the ray from a node box: the nearest far plane. Axes with a
+/// zero direction component never end the segment. Twin of `box_exit` in common.glsl.
+fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize) {
+    let mut t_exit = f32::INFINITY;
+    let mut face = 0usize;
+    for axis in 0..3 {
+        if r.dir[axis] == 0.0 {
+            continue;
+        }
+        let positive = r.dir[axis] > 0.0;
+        let plane = if positive { b[3 + axis] } else { b[axis] };
+        let t = (plane - r.origin[axis]) * r.inv_dir[axis];
+        if t < t_exit {
+            t_exit = t;
+            face = 2 * axis + positive as usize;
+        }
+    }
+    (t_exit, face)
+}
+
+/// Twin of `trace_backtrack` in glsl/traverse/backtrack.glsl.
+fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
+    let mut node = 0u32;
+    let mut t1 = t1_scene;
+    let mut ties_go_far = false;
+    for _ in 0..MAX_TRAVERSAL_STEPS {
+        let n = s.fetch(node);
+        if !n.is_leaf() {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            match visit {
+                Visit::Far => node = far,
+                Visit::Both => {
+                    node = near;
+                    t1 = ts;
+                }
+                Visit::Near | Visit::BothSame => node = near,
+            }
+            continue;
+        }
+        if s.leaf(n, t1) || t1 >= t1_scene {
+            return true;
+        }
+        // Climb to the first ancestor the ray leaves after t1.
+        t0 = t1;
+        let mut exit = t0;
+        let mut depth = 0;
+        while exit <= t0 && node != 0 && depth < MAX_STACK {
+            node = links.parents[node as usize];
+            s.c.nodes += 1;
+            exit = box_exit(s.r, &links.boxes[node as usize]).0;
+            depth += 1;
+        }
+        if exit <= t0 {
+            return true; // the root's box ends here: nothing left
+        }
+        t1 = glsl_min(glsl_min(exit, t1_scene), s.best.t);
+        ties_go_far = true;
+        s.c.restarts += 1;
+    }
+    false
+}
+
+/// Twin of `trace_ropes` in glsl/traverse/ropes.glsl.
+fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
+    let mut node = 0u32;
+    let mut t1 = t1_scene;
+    let mut ties_go_far = false;
+    for _ in 0..MAX_TRAVERSAL_STEPS {
+        let n = s.fetch(node);
+        if !n.is_leaf() {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            match visit {
+                Visit::Far => node = far,
+                Visit::Both => {
+                    node = near;
+                    t1 = ts;
+                }
+                Visit::Near | Visit::BothSame => node = near,
+            }
+            continue;
+        }
+        // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
+        let (exit, face) = box_exit(s.r, &links.boxes[node as usize]);
+        let leaf_t1 = glsl_min(glsl_min(exit, t1_scene), t1);
+        if s.leaf(n, leaf_t1) || leaf_t1 >= t1_scene {
+            return true;
+        }
+        let next = links.ropes[node as usize][face];
+        if next == NO_ROPE {
+            return true;
+        }
+        // Never step backwards: keep t0 when rounding puts the exit behind it.
+        t0 = glsl_max(t0, leaf_t1);
+        t1 = glsl_min(t1_scene, s.best.t);
+        node = next;
+        ties_go_far = true;
+        s.c.restarts += 1;
     }
     false
 }

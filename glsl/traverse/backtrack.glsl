@@ -1,0 +1,51 @@
+// `backtrack`: kd-backtrack (Foley & Sugerman 2005). No stack: after a leaf
+// without a hit inside it, climb the parent links (side buffer) to the first
+// ancestor whose box (side buffer) the ray leaves after the leaf's exit, and
+// descend from there with [leaf exit, ancestor exit].
+// CPU twin: `trace_backtrack` in src/kdtree/traverse.rs.
+#ifndef TRAVERSE_BACKTRACK_GLSL
+#define TRAVERSE_BACKTRACK_GLSL
+
+bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    uint node = 0u;
+    float t1 = t1_scene;
+    bool ties_go_far = false;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        uvec2 n = fetch_node(node, c);
+        if (!node_is_leaf(n)) {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            if (visit == VISIT_FAR) {
+                node = far;
+            } else if (visit == VISIT_BOTH) {
+                node = near;
+                t1 = ts;
+            } else {
+                node = near;
+            }
+            continue;
+        }
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
+        // Climb to the first ancestor the ray leaves after t1.
+        t0 = t1;
+        float exit_t = t0;
+        uint depth = 0u;
+        for (; exit_t <= t0 && node != 0u && depth < MAX_STACK; ++depth) {
+            node = parents[node];
+            c.nodes += 1u;
+            uint face;
+            exit_t = box_exit(r, node, face);
+        }
+        if (exit_t <= t0 && node != 0u && depth < MAX_STACK) return false;  // climb cut short
+        if (exit_t <= t0) return true;  // the root's box ends here: nothing left
+        t1 = min(min(exit_t, t1_scene), best.t);
+        ties_go_far = true;
+        c.restarts += 1u;
+    }
+    return false;
+}
+
+#endif

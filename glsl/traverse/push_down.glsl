@@ -1,0 +1,49 @@
+// `push-down`: kd-restart that restarts not at the root but at the push-down
+// node (Horn et al. 2007): the deepest node reached before the first decision
+// that needed both children. Its region holds the whole rest of the segment, so
+// the levels above it are never visited again.
+// CPU twin: `trace_push_down` in src/kdtree/traverse.rs.
+#ifndef TRAVERSE_PUSH_DOWN_GLSL
+#define TRAVERSE_PUSH_DOWN_GLSL
+
+bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    uint node = 0u;
+    float t1 = t1_scene;
+    bool ties_go_far = false;
+    uint restart_node = 0u;
+    bool push_down = true;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        uvec2 n = fetch_node(node, c);
+        if (!node_is_leaf(n)) {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            if (visit == VISIT_FAR) {
+                node = far;
+            } else if (visit == VISIT_NEAR) {
+                node = near;
+            } else if (visit == VISIT_BOTH) {
+                node = near;
+                t1 = ts;
+                push_down = false;
+            } else {
+                node = near;
+                push_down = false;
+            }
+            if (push_down) restart_node = node;
+            continue;
+        }
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
+        t0 = t1;
+        t1 = min(t1_scene, best.t);
+        node = restart_node;
+        push_down = true;
+        ties_go_far = true;
+        c.restarts += 1u;
+    }
+    return false;
+}
+
+#endif

@@ -1,0 +1,49 @@
+// `ropes` (Popov, Günther, Seidel & Slusallek 2007), single rays: each leaf links
+// each of its six faces to the subtree across it (side buffer `ropes`, leaf boxes
+// in `node_boxes`). After a leaf without a hit inside it, the ray leaves through
+// the face where its box ends, follows that rope and descends the subtree to the
+// leaf that holds the segment just behind. No stack, no restart from the root.
+// CPU twin: `trace_ropes` in src/kdtree/traverse.rs.
+#ifndef TRAVERSE_ROPES_GLSL
+#define TRAVERSE_ROPES_GLSL
+
+bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    uint node = 0u;
+    float t1 = t1_scene;
+    bool ties_go_far = false;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        uvec2 n = fetch_node(node, c);
+        if (!node_is_leaf(n)) {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            if (visit == VISIT_FAR) {
+                node = far;
+            } else if (visit == VISIT_BOTH) {
+                node = near;
+                t1 = ts;
+            } else {
+                node = near;
+            }
+            continue;
+        }
+        // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
+        uint face;
+        float exit_t = box_exit(r, node, face);
+        float leaf_t1 = min(min(exit_t, t1_scene), t1);
+        uint leaf = visit_leaf(r, n, leaf_t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE || leaf_t1 >= t1_scene) return true;
+        uint next = ropes[node * 6u + face];
+        if (next == NO_ROPE) return true;
+        // Never step backwards: keep t0 when rounding puts the exit behind it.
+        t0 = max(t0, leaf_t1);
+        t1 = min(t1_scene, best.t);
+        node = next;
+        ties_go_far = true;
+        c.restarts += 1u;
+    }
+    return false;
+}
+
+#endif

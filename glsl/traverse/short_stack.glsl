@@ -1,0 +1,71 @@
+// `short-stack` and `push-down-short-stack` (Horn et al. 2007): a ring buffer of
+// STACK_SIZE entries; a push onto a full stack overwrites (drops) the oldest
+// entry; when the stack runs empty before the segment ends, restart behind the
+// last leaf — at the root, or at the push-down node when `use_push_down`.
+// CPU twin: `trace_short_stack` in src/kdtree/traverse.rs.
+#ifndef TRAVERSE_SHORT_STACK_GLSL
+#define TRAVERSE_SHORT_STACK_GLSL
+
+bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down, inout Hit best,
+                       inout TraceCounters c) {
+    uint stack_node[STACK_SIZE];
+    float stack_t0[STACK_SIZE];
+    float stack_t1[STACK_SIZE];
+    uint head = 0u;   // next slot to write
+    uint count = 0u;
+    uint node = 0u;
+    float t1 = t1_scene;
+    bool ties_go_far = false;
+    uint restart_node = 0u;
+    bool push_down = use_push_down;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        uvec2 n = fetch_node(node, c);
+        if (!node_is_leaf(n)) {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            if (visit == VISIT_FAR) {
+                node = far;
+            } else if (visit == VISIT_NEAR) {
+                node = near;
+            } else {
+                // Push the far child; a full stack loses its oldest entry.
+                if (count == STACK_SIZE) {
+                    c.drops += 1u;
+                } else {
+                    count += 1u;
+                }
+                stack_node[head] = far;
+                stack_t0[head] = visit == VISIT_BOTH ? ts : t0;
+                stack_t1[head] = t1;
+                head = (head + 1u) % STACK_SIZE;
+                if (visit == VISIT_BOTH) t1 = ts;
+                node = near;
+                push_down = false;
+            }
+            if (push_down) restart_node = node;
+            continue;
+        }
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE) return true;
+        if (count > 0u) {
+            head = (head + STACK_SIZE - 1u) % STACK_SIZE;
+            count -= 1u;
+            node = stack_node[head];
+            t0 = stack_t0[head];
+            t1 = stack_t1[head];
+            continue;
+        }
+        if (t1 >= t1_scene) return true;
+        t0 = t1;
+        t1 = min(t1_scene, best.t);
+        node = restart_node;
+        push_down = use_push_down;
+        ties_go_far = true;
+        c.restarts += 1u;
+    }
+    return false;
+}
+
+#endif
