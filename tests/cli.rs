@@ -94,3 +94,102 @@ fn stats_prints_json() {
     assert!(text.contains("\"triangles\":38"), "{text}");
     assert!(text.contains("\"nodes\":"), "{text}");
 }
+
+#[test]
+fn counters_csv_heatmap_and_any_hit() {
+    let scene = scene_path("teapot.obj");
+    let rays = temp("teapot-cam.rays");
+    let hits = temp("teapot-cam.hits");
+    let csv = temp("teapot.csv");
+    let o =
+        kdtrace(&["rays", scene.to_str().unwrap(), "-o", rays.to_str().unwrap(), "--width", "64", "--height", "48"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = kdtrace(&[
+        "trace",
+        scene.to_str().unwrap(),
+        rays.to_str().unwrap(),
+        "-o",
+        hits.to_str().unwrap(),
+        "--traversal",
+        "short-stack",
+        "--stack-size",
+        "2",
+        "--counters",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("ray,nodes,leaves,triangles,restarts,steps,drops"));
+    let rows: Vec<Vec<u32>> = lines.map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 64 * 48);
+    assert!(rows.iter().all(|r| r[5] >= r[2] && r[1] >= r[2]), "steps and nodes count every leaf");
+    assert!(rows.iter().any(|r| r[1] == 0), "rays that miss the scene box visit no node");
+    assert!(rows.iter().any(|r| r[3] > 0 && r[6] > 0), "some rays test triangles and drop stack entries");
+
+    let closest = kdtrace::io::read_hits(&hits).unwrap();
+    let o =
+        kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap(), "--any-hit"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let any = kdtrace::io::read_hits(&hits).unwrap();
+    assert!(
+        closest.iter().zip(&any).all(|(c, a)| c.is_hit() == a.is_hit()),
+        "any-hit finds a hit exactly when one exists"
+    );
+
+    let o =
+        kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", "/dev/null", "--stack-size", "9"]);
+    assert!(!o.status.success() && stderr(&o).contains("1..=8"), "{}", stderr(&o));
+
+    let png = temp("heat.png");
+    let o = kdtrace(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "80",
+        "--height",
+        "60",
+        "--heatmap",
+        "nodes",
+        "--traversal",
+        "restart",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("heatmap of nodes"), "{}", stderr(&o));
+    assert_eq!(image::open(&png).unwrap().to_rgb8().dimensions(), (80, 60));
+}
+
+#[test]
+fn bench_prints_a_table_for_every_requested_traversal() {
+    let scene = scene_path("cornell_box.obj");
+    let o = kdtrace(&[
+        "bench",
+        scene.to_str().unwrap(),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--random",
+        "500",
+        "--repeat",
+        "1",
+        "--reference-sample",
+        "100",
+        "--traversals",
+        "stack,short-stack:3,ropes",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for needle in ["| stack |", "| short-stack(3) |", "| ropes |", "768 camera rays", "500 random rays"] {
+        assert!(out.contains(needle), "missing {needle:?} in\n{out}");
+    }
+    // Every row agrees with the stack and with the float64 reference.
+    for line in out.lines().filter(|l| l.starts_with("| stack") || l.starts_with("| short") || l.starts_with("| ropes"))
+    {
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        assert_eq!(cells[10], "0", "hits differ from stack: {line}");
+        assert!(cells[11].starts_with("0/"), "float64 errors: {line}");
+    }
+}
