@@ -8,6 +8,8 @@
 // cap) is written as PRIM_INCOMPLETE, which the host reports, never as a miss.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
 
 #include "ray.glsl"
 #include "kdnode.glsl"
@@ -20,6 +22,7 @@ layout(constant_id = 0) const uint VARIANT = VARIANT_STACK;
 layout(constant_id = 1) const bool COUNTERS = false;
 layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
 layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
+layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
 
 layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { uvec2 nodes[]; };
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
@@ -41,6 +44,9 @@ layout(push_constant) uniform Push { TraceParams params; };
 #include "short_stack.glsl"
 #include "backtrack.glsl"
 #include "ropes.glsl"
+#include "packet.glsl"
+#include "packet_stack.glsl"
+#include "packet_short_stack.glsl"
 
 bool ray_is_valid(Ray ray) {
     bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
@@ -60,37 +66,47 @@ void main() {
     best.v = 0.0;
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
 
-    if (!ray_is_valid(ray)) {
-        best.prim_id = PRIM_INVALID;
-    } else {
-        TraceRay r;
-        r.origin = ray.origin;
-        r.dir = ray.dir;
-        r.inv_dir = 1.0 / ray.dir;
-        r.tmin = ray.tmin;
-        r.tmax = ray.tmax;
-        r.wr = watertight_ray(ray.origin, ray.dir);
-        float t0, t1;
-        if (clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1)) {
-            bool finished;
-            if (VARIANT == VARIANT_RESTART) {
-                finished = trace_restart(r, t0, t1, best, c);
-            } else if (VARIANT == VARIANT_PUSH_DOWN) {
-                finished = trace_push_down(r, t0, t1, best, c);
-            } else if (VARIANT == VARIANT_SHORT_STACK) {
-                finished = trace_short_stack(r, t0, t1, false, best, c);
-            } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
-                finished = trace_short_stack(r, t0, t1, true, best, c);
-            } else if (VARIANT == VARIANT_BACKTRACK) {
-                finished = trace_backtrack(r, t0, t1, best, c);
-            } else if (VARIANT == VARIANT_ROPES) {
-                finished = trace_ropes(r, t0, t1, best, c);
-            } else {
-                finished = trace_stack(r, t0, t1, best, c);
-            }
-            if (!finished) best.prim_id = PRIM_INCOMPLETE;
+    bool valid = ray_is_valid(ray);
+    TraceRay r;
+    r.origin = ray.origin;
+    r.dir = ray.dir;
+    r.inv_dir = 1.0 / ray.dir;
+    r.tmin = ray.tmin;
+    r.tmax = ray.tmax;
+    r.wr = watertight_ray(ray.origin, ray.dir);
+    float t0 = 0.0, t1 = 0.0;
+    bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
+    if (!valid) best.prim_id = PRIM_INVALID;
+    bool packet_variant = VARIANT == VARIANT_STACK || VARIANT == VARIANT_RESTART || VARIANT == VARIANT_PUSH_DOWN ||
+                          VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
+    bool finished = true;
+    if (PACKET_WIDTH > 1u && packet_variant) {
+        // Every lane of a packet enters, finished or not: decisions are ballots.
+        if (VARIANT == VARIANT_STACK) {
+            finished = trace_packet_stack(alive, r, t0, t1, best, c);
+        } else {
+            uint size = (VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) ? STACK_SIZE : 0u;
+            bool use_push_down = VARIANT == VARIANT_PUSH_DOWN || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
+            finished = trace_packet_short_stack(alive, r, t0, t1, size, use_push_down, best, c);
+        }
+    } else if (alive) {
+        if (VARIANT == VARIANT_RESTART) {
+            finished = trace_restart(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN) {
+            finished = trace_push_down(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, false, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, true, best, c);
+        } else if (VARIANT == VARIANT_BACKTRACK) {
+            finished = trace_backtrack(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_ROPES) {
+            finished = trace_ropes(r, t0, t1, best, c);
+        } else {
+            finished = trace_stack(r, t0, t1, best, c);
         }
     }
+    if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
     if (best.prim_id >= PRIM_INCOMPLETE) {
         best.t = best.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
         best.u = 0.0;

@@ -75,11 +75,23 @@ struct TraversalArgs {
     /// Short-stack entries (1..=8) for short-stack and push-down-short-stack.
     #[arg(long, default_value_t = 3)]
     stack_size: u32,
+    /// Lanes per packet: 1 = single rays; 2, 4, 8, ... up to the subgroup size (subgroup ballots).
+    #[arg(long, default_value_t = 1)]
+    packet_width: u32,
+    /// Require this subgroup size (VK_EXT_subgroup_size_control); default: the device's.
+    #[arg(long)]
+    subgroup_size: Option<u32>,
 }
 
 impl TraversalArgs {
     fn parse(&self, any_hit: bool) -> Result<Traversal> {
-        let traversal = Traversal { variant: self.traversal.parse()?, stack_size: self.stack_size, any_hit };
+        let traversal = Traversal {
+            variant: self.traversal.parse()?,
+            stack_size: self.stack_size,
+            any_hit,
+            packet_width: self.packet_width,
+            subgroup_size: self.subgroup_size,
+        };
         traversal.validate()?;
         Ok(traversal)
     }
@@ -103,9 +115,15 @@ struct BenchArgs {
     /// Rays per batch checked against the float64 brute force.
     #[arg(long, default_value_t = 1000)]
     reference_sample: usize,
-    /// Comma-separated traversals (default: all, short stacks of 1, 2, 3 and 8).
+    /// Comma-separated traversals, `name` or `name:stack-size` (default: all, short stacks of 1, 2, 3 and 8).
     #[arg(long)]
     traversals: Option<String>,
+    /// Lanes per packet for every traversal (1 = single rays).
+    #[arg(long, default_value_t = 1)]
+    packet_width: u32,
+    /// Require this subgroup size.
+    #[arg(long)]
+    subgroup_size: Option<u32>,
 }
 
 #[derive(clap::Args)]
@@ -230,21 +248,28 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     let ctx = context()?;
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
-    let rays = kdtrace::render::camera_rays(&camera, args.width, args.height);
+    // Morton order: every aligned run of 4^k rays is a square tile, so packets hold neighbours.
+    let (rays, pixels) = kdtrace::render::camera_rays_morton(&camera, args.width, args.height);
     let bar = trace_bar(rays.len());
     let options = TraceOptions { traversal, counters: heatmap.is_some() };
     let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
     let image = match (&heatmap, &result.counters) {
         (Some(kind), Some(counters)) => {
-            let values: Vec<u32> =
-                counters.iter().map(|c| if kind == "nodes" { c.nodes } else { c.triangles }).collect();
+            let mut values = vec![0u32; pixels.len()];
+            for (c, &p) in counters.iter().zip(&pixels) {
+                values[p as usize] = if kind == "nodes" { c.nodes } else { c.triangles };
+            }
             let (image, max, mean) = kdtrace::render::heatmap(&values, args.width, args.height);
             eprintln!("heatmap of {kind} per ray ({}): mean {mean:.1}, max {max}", traversal.variant);
             image
         }
         _ => {
-            let colors = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
+            let shaded = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
+            let mut colors = vec![Vec3::ZERO; pixels.len()];
+            for (c, &p) in shaded.iter().zip(&pixels) {
+                colors[p as usize] = *c;
+            }
             kdtrace::render::to_image(&colors, args.width, args.height)
         }
     };
@@ -349,7 +374,12 @@ fn bench(args: BenchArgs) -> Result<()> {
                     Some((n, s)) => (n, s.parse::<u32>().with_context(|| format!("stack size in '{item}'"))?),
                     None => (item.trim(), 3),
                 };
-                let t = Traversal { variant: name.parse()?, stack_size: size, any_hit: false };
+                let t = Traversal {
+                    stack_size: size,
+                    packet_width: args.packet_width,
+                    subgroup_size: args.subgroup_size,
+                    ..Traversal::closest(name.parse()?)
+                };
                 t.validate()?;
                 Ok(t)
             })
@@ -358,10 +388,14 @@ fn bench(args: BenchArgs) -> Result<()> {
             let mut all = vec![];
             for v in Variant::ALL {
                 if v.uses_short_stack() {
-                    all.extend([1, 2, 3, 8].map(|n| Traversal { variant: v, stack_size: n, any_hit: false }));
+                    all.extend([1, 2, 3, 8].map(|n| Traversal { stack_size: n, ..Traversal::closest(v) }));
                 } else {
                     all.push(Traversal::closest(v));
                 }
+            }
+            for t in &mut all {
+                t.packet_width = args.packet_width;
+                t.subgroup_size = args.subgroup_size;
             }
             all
         }

@@ -19,6 +19,38 @@ pub fn camera_rays(camera: &Camera, width: u32, height: u32) -> Vec<Ray> {
     rays
 }
 
+/// One ray per pixel in Morton (Z) order over the image, and the row-major pixel
+/// index of each ray. Every aligned run of 4^k rays covers a 2^k × 2^k tile (and
+/// 2·4^k a 2:1 one), so a packet of consecutive lanes holds neighbouring pixels.
+pub fn camera_rays_morton(camera: &Camera, width: u32, height: u32) -> (Vec<Ray>, Vec<u32>) {
+    let side = width.max(height).next_power_of_two() as u64;
+    let mut rays = Vec::with_capacity(width as usize * height as usize);
+    let mut pixels = Vec::with_capacity(rays.capacity());
+    for code in 0..side * side {
+        let (x, y) = morton_decode(code);
+        if x < width && y < height {
+            let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            rays.push(Ray::new(origin, dir, 0.0, f32::INFINITY));
+            pixels.push(y * width + x);
+        }
+    }
+    (rays, pixels)
+}
+
+/// The (x, y) of a 2D Morton code (x in the even bits).
+fn morton_decode(code: u64) -> (u32, u32) {
+    let compact = |mut v: u64| {
+        v &= 0x5555_5555_5555_5555;
+        v = (v | (v >> 1)) & 0x3333_3333_3333_3333;
+        v = (v | (v >> 2)) & 0x0F0F_0F0F_0F0F_0F0F;
+        v = (v | (v >> 4)) & 0x00FF_00FF_00FF_00FF;
+        v = (v | (v >> 8)) & 0x0000_FFFF_0000_FFFF;
+        v = (v | (v >> 16)) & 0x0000_0000_FFFF_FFFF;
+        v as u32
+    };
+    (compact(code), compact(code >> 1))
+}
+
 /// The geometric normal of triangle `prim`, facing against `dir`.
 pub fn facing_normal(scene: &Scene, prim: u32, dir: Vec3) -> Vec3 {
     let [a, b, c] = scene.triangles[prim as usize];
@@ -78,4 +110,26 @@ pub fn heatmap(values: &[u32], width: u32, height: u32) -> (image::RgbImage, u32
         image::Rgb(ramp(values[(y * width + x) as usize] as f32 / max as f32))
     });
     (image, max, mean)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_order_covers_every_pixel_once_in_tiles() {
+        let camera = Camera::frame(&crate::geom::Aabb::new(Vec3::ZERO, Vec3::ONE));
+        let (rays, pixels) = camera_rays_morton(&camera, 37, 21);
+        assert_eq!(rays.len(), 37 * 21);
+        let mut seen = pixels.clone();
+        seen.sort_unstable();
+        assert!(seen.iter().copied().eq(0..37 * 21));
+        // The first 16 rays form the 4x4 tile at the origin.
+        let tile: Vec<(u32, u32)> = pixels[..16].iter().map(|p| (p % 37, p / 37)).collect();
+        assert!(tile.iter().all(|&(x, y)| x < 4 && y < 4));
+        let row_major = camera_rays(&camera, 37, 21);
+        for (ray, &p) in rays.iter().zip(&pixels) {
+            assert_eq!(*ray, row_major[p as usize]);
+        }
+    }
 }

@@ -27,7 +27,7 @@ fn all_traversals() -> Vec<Traversal> {
     let mut all = Vec::new();
     for variant in Variant::ALL {
         if variant.uses_short_stack() {
-            all.extend([1, 2, 3, 5, 8].map(|stack_size| Traversal { variant, stack_size, any_hit: false }));
+            all.extend([1, 2, 3, 5, 8].map(|stack_size| Traversal { stack_size, ..Traversal::closest(variant) }));
         } else {
             all.push(Traversal::closest(variant));
         }

@@ -18,7 +18,7 @@ fn variants() -> Vec<Traversal> {
     Variant::ALL
         .iter()
         .map(|&v| Traversal::closest(v))
-        .chain([Traversal { variant: Variant::ShortStack, stack_size: 1, any_hit: false }])
+        .chain([Traversal { stack_size: 1, ..Traversal::closest(Variant::ShortStack) }])
         .collect()
 }
 

@@ -106,21 +106,46 @@ pub struct Traversal {
     pub stack_size: u32,
     /// Any-hit (shadow-ray) mode: stop at the first hit in [tmin, tmax], not the closest.
     pub any_hit: bool,
+    /// Lanes per packet (Horn et al.'s packets as aligned groups of subgroup lanes):
+    /// 1 = single rays; 2, 4, 8, … up to the subgroup size for `stack`, `restart`,
+    /// `push-down`, `short-stack` and `push-down-short-stack` (`backtrack` and `ropes`
+    /// always trace single rays). The CPU twins trace single rays; packets must give
+    /// the same hits.
+    pub packet_width: u32,
+    /// A required subgroup size (`VK_EXT_subgroup_size_control`); `None` = the device's.
+    pub subgroup_size: Option<u32>,
 }
 
 impl Traversal {
-    /// Closest hit with `variant` and the paper's short stack of 3.
+    /// Closest hit with `variant`, the paper's short stack of 3, single rays.
     pub fn closest(variant: Variant) -> Self {
-        Traversal { variant, stack_size: 3, any_hit: false }
+        Traversal { variant, stack_size: 3, any_hit: false, packet_width: 1, subgroup_size: None }
     }
 
-    /// Checks the stack size.
+    /// True when the kernel traces packets with this traversal.
+    pub fn uses_packets(&self) -> bool {
+        self.packet_width > 1 && !self.variant.uses_links()
+    }
+
+    /// Checks the stack size and the packet width (a power of two; the device check
+    /// against the subgroup size happens when the kernel is made).
     pub fn validate(&self) -> crate::Result<()> {
         if self.stack_size == 0 || self.stack_size > MAX_SHORT_STACK {
             return Err(crate::Error::InvalidInput(format!(
                 "short-stack size {} is outside 1..={MAX_SHORT_STACK}",
                 self.stack_size
             )));
+        }
+        if !self.packet_width.is_power_of_two() || self.packet_width > 128 {
+            return Err(crate::Error::InvalidInput(format!(
+                "packet width {} must be a power of two in 1..=128",
+                self.packet_width
+            )));
+        }
+        if let Some(size) = self.subgroup_size {
+            if !size.is_power_of_two() || size > 128 {
+                return Err(crate::Error::InvalidInput(format!("subgroup size {size} must be a power of two")));
+            }
         }
         Ok(())
     }

@@ -1,0 +1,108 @@
+// `restart`, `push-down`, `short-stack` and `push-down-short-stack` for packets
+// (Horn et al. 2007): one shared ring buffer of `size` entries (0 = kd-restart)
+// and one shared restart node. Every lane walks its own segment strictly front
+// to back: it takes part in an entry only if the entry starts exactly where its
+// last leaf ended; any part it could not take (the packet went the other way, an
+// entry was dropped) is picked up by the next restart, which starts each lane at
+// the exit of its last leaf.
+#ifndef TRAVERSE_PACKET_SHORT_STACK_GLSL
+#define TRAVERSE_PACKET_SHORT_STACK_GLSL
+
+bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_scene, uint size, bool use_push_down,
+                              inout Hit best, inout TraceCounters c) {
+    uvec4 mask = packet_mask();
+    uint stack_node[STACK_SIZE];
+    float stack_t0[STACK_SIZE];
+    float stack_t1[STACK_SIZE];
+    uint head = 0u;   // next slot to write
+    uint count = 0u;
+    uint node = 0u;
+    uint restart_node = 0u;
+    bool push_down = use_push_down;
+    float t0 = t_start;
+    float t1 = t1_scene;
+    float t_done = t_start;    // exit of the last leaf this lane finished
+    bool ties_go_far = false;
+    bool lane_on = alive;
+    bool complete = true;
+    if (!packet_any(lane_on, mask)) return true;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        c.steps += 1u;
+        uvec2 n = nodes[node];
+        if (lane_on) c.nodes += 1u;
+        if (!node_is_leaf(n)) {
+            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, ties_go_far);
+            // A lane's first child is its near one when it needs it, else the only one.
+            bool wants_below = s.below && (s.below_first || !s.above);
+            bool wants_above = s.above && !wants_below;
+            bool any_below = packet_any(wants_below, mask);
+            bool any_above = packet_any(wants_above, mask);
+            uint below = node + 1u;
+            uint above = node_above_child(n);
+            bool go_below = any_below && (!any_above || packet_count(wants_below, mask) >= packet_count(wants_above, mask));
+            uint first = go_below ? below : above;
+            uint second = go_below ? above : below;
+            // Lanes that go on, and the part of the other child each lane still needs.
+            bool goes_on = go_below ? wants_below : wants_above;
+            bool needs_second = go_below ? s.above : s.below;
+            float second_t0 = go_below ? s.above_t0 : s.below_t0;
+            float second_t1 = go_below ? s.above_t1 : s.below_t1;
+            if (packet_any(needs_second, mask)) {
+                push_down = false;
+                if (size > 0u) {
+                    if (count == size) {
+                        // The oldest entry is overwritten: its lanes will restart.
+                        if (alive) c.drops += 1u;
+                    } else {
+                        count += 1u;
+                    }
+                    stack_node[head] = second;
+                    stack_t0[head] = needs_second ? second_t0 : uintBitsToFloat(0x7f800000u);
+                    stack_t1[head] = needs_second ? second_t1 : uintBitsToFloat(0xff800000u);
+                    head = (head + 1u) % size;
+                }
+            }
+            if (packet_any(s.splits, mask)) push_down = false;
+            node = first;
+            lane_on = goes_on;
+            t0 = go_below ? s.below_t0 : s.above_t0;
+            t1 = go_below ? s.below_t1 : s.above_t1;
+            if (push_down) restart_node = node;
+            continue;
+        }
+        if (lane_on) {
+            c.leaves += 1u;
+            if (!intersect_leaf(r, n, best, c)) complete = false;
+            bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best.t <= t1;
+            t_done = t1;
+            if (done || t1 >= t1_scene) alive = false;
+        }
+        // Pop until an entry that continues some lane's segment.
+        lane_on = false;
+        while (count > 0u) {
+            head = (head + size - 1u) % size;
+            count -= 1u;
+            node = stack_node[head];
+            t0 = stack_t0[head];
+            t1 = stack_t1[head];
+            lane_on = alive && t0 <= t1 && t0 == t_done;
+            if (packet_any(lane_on, mask)) break;
+        }
+        if (packet_any(lane_on, mask)) continue;
+        if (!packet_any(alive, mask)) return complete;
+        // Restart every unfinished lane behind its last leaf.
+        count = 0u;
+        node = restart_node;
+        push_down = use_push_down;
+        lane_on = alive;
+        t0 = t_done;
+        t1 = min(t1_scene, best.t);
+        if (alive) {
+            ties_go_far = true;
+            c.restarts += 1u;
+        }
+    }
+    return false;
+}
+
+#endif

@@ -1,0 +1,82 @@
+// `stack` for packets: the packet descends together with one shared stack of
+// nodes; each lane stores its own interval for every entry (empty when it does
+// not need that child). The packet visits children in the order most of its
+// lanes see as front to back; a lane whose own order differs still gets every
+// part of its segment, and the closest hit wins because a popped entry is
+// visited only by lanes whose interval starts before their best hit.
+#ifndef TRAVERSE_PACKET_STACK_GLSL
+#define TRAVERSE_PACKET_STACK_GLSL
+
+// True while the lane may still find something in an entry starting at t0.
+bool lane_wants(bool alive, float t0, float t1, Hit best) {
+    if (!alive || !(t0 <= t1)) return false;
+    if (ANY_HIT) return best.prim_id == PRIM_MISS;
+    return t0 < best.t || (best.prim_id == PRIM_MISS && t0 <= best.t);
+}
+
+// Returns false when this lane's traversal was cut short.
+bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
+    uvec4 mask = packet_mask();
+    uint stack_node[MAX_STACK];
+    float stack_t0[MAX_STACK];
+    float stack_t1[MAX_STACK];
+    uint sp = 0u;
+    uint node = 0u;
+    bool lane_on = alive;
+    bool complete = true;
+    if (!packet_any(lane_on, mask)) return true;
+    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+        c.steps += 1u;
+        uvec2 n = nodes[node];
+        if (lane_on) c.nodes += 1u;
+        if (!node_is_leaf(n)) {
+            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, false);
+            bool any_below = packet_any(s.below, mask);
+            bool any_above = packet_any(s.above, mask);
+            uint below = node + 1u;
+            uint above = node_above_child(n);
+            if (any_below && any_above) {
+                bool below_goes_first = packet_count(lane_on && s.below_first, mask) >=
+                                        packet_count(lane_on && !s.below_first, mask);
+                stack_node[sp] = below_goes_first ? above : below;
+                bool second = below_goes_first ? s.above : s.below;
+                stack_t0[sp] = second ? (below_goes_first ? s.above_t0 : s.below_t0) : uintBitsToFloat(0x7f800000u);
+                stack_t1[sp] = second ? (below_goes_first ? s.above_t1 : s.below_t1) : uintBitsToFloat(0xff800000u);
+                ++sp;
+                node = below_goes_first ? below : above;
+                lane_on = below_goes_first ? s.below : s.above;
+                t0 = below_goes_first ? s.below_t0 : s.above_t0;
+                t1 = below_goes_first ? s.below_t1 : s.above_t1;
+            } else if (any_below) {
+                node = below;
+                lane_on = s.below;
+                t0 = s.below_t0;
+                t1 = s.below_t1;
+            } else {
+                node = above;
+                lane_on = s.above;
+                t0 = s.above_t0;
+                t1 = s.above_t1;
+            }
+            continue;
+        }
+        if (lane_on) {
+            c.leaves += 1u;
+            if (!intersect_leaf(r, n, best, c)) complete = false;
+        }
+        // Pop until an entry some lane still needs.
+        lane_on = false;
+        while (sp > 0u) {
+            --sp;
+            node = stack_node[sp];
+            t0 = stack_t0[sp];
+            t1 = stack_t1[sp];
+            lane_on = lane_wants(alive, t0, t1, best);
+            if (packet_any(lane_on, mask)) break;
+        }
+        if (!packet_any(lane_on, mask)) return complete && sp == 0u;
+    }
+    return false;
+}
+
+#endif

@@ -1,0 +1,159 @@
+//! Packets as subgroups: every packet traversal, at every packet width the device's
+//! subgroup allows, returns the same hit as single-ray traversal for every ray
+//! (the same t bit for bit; another primitive only in an exact tie). Run at the
+//! device's subgroup size, and on lavapipe again at 4 lanes in a child process
+//! with `LP_NATIVE_VECTOR_WIDTH=128`.
+
+mod common;
+
+use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
+use kdtrace::geom::WatertightRay;
+use kdtrace::kdtree::traverse::{Traversal, Variant};
+use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::render::camera_rays_morton;
+use kdtrace::scene::{Camera, Scene};
+use kdtrace::trace::{TraceOptions, Tracer};
+use kdtrace::{Hit, Ray};
+
+const PACKET_VARIANTS: [(Variant, u32); 6] = [
+    (Variant::Stack, 3),
+    (Variant::Restart, 3),
+    (Variant::PushDown, 3),
+    (Variant::ShortStack, 1),
+    (Variant::ShortStack, 3),
+    (Variant::PushDownShortStack, 3),
+];
+
+fn check_scene(tracer: &mut Tracer, scene: &Scene, rays: &[Ray], widths: &[u32], name: &str) {
+    for (variant, stack_size) in PACKET_VARIANTS {
+        for any_hit in [false, true] {
+            let single = Traversal { stack_size, any_hit, ..Traversal::closest(variant) };
+            let reference = tracer.trace(rays, &TraceOptions { traversal: single, counters: false }).unwrap().hits;
+            for &packet_width in widths {
+                let traversal = Traversal { packet_width, ..single };
+                let result = tracer.trace(rays, &TraceOptions { traversal, counters: true }).unwrap();
+                let mut ties = 0;
+                for (i, (p, s)) in result.hits.iter().zip(&reference).enumerate() {
+                    check_hit(scene, &rays[i], p, s, any_hit, &mut ties)
+                        .unwrap_or_else(|why| panic!("{name} {traversal:?} ray {i} {:?}: {why}", rays[i]));
+                }
+                let counters = result.counters.unwrap();
+                let active: u64 = counters.iter().map(|c| c.nodes as u64).sum();
+                let steps: u64 = counters.iter().map(|c| c.steps as u64).sum();
+                assert!(active <= steps, "a lane is active in at most every step of its packet");
+                eprintln!(
+                    "{name} {}{} W={packet_width}: same hits as single rays ({ties} exact ties), SIMD efficiency {:.0}%",
+                    variant,
+                    if any_hit { " any-hit" } else { "" },
+                    100.0 * active as f64 / steps.max(1) as f64
+                );
+            }
+        }
+    }
+}
+
+fn check_hit(
+    scene: &Scene,
+    ray: &Ray,
+    packet: &Hit,
+    single: &Hit,
+    any_hit: bool,
+    ties: &mut usize,
+) -> Result<(), String> {
+    if any_hit {
+        if packet.is_hit() != single.is_hit()
+            || packet.prim_id >= kdtrace::consts::PRIM_INCOMPLETE && packet.prim_id != single.prim_id
+        {
+            return Err(format!("any-hit status differs: packet {packet:?}, single {single:?}"));
+        }
+        if packet.is_hit() {
+            let [v0, v1, v2] = scene.triangles[packet.prim_id as usize];
+            let wr = WatertightRay::new(ray.origin.into(), ray.dir.into());
+            if wr.intersect(v0, v1, v2, ray.tmin, ray.tmax).is_none() {
+                return Err(format!("any-hit occluder {} is not hit", packet.prim_id));
+            }
+        }
+        return Ok(());
+    }
+    if packet.t.to_bits() != single.t.to_bits() {
+        return Err(format!("t differs: packet {packet:?}, single {single:?}"));
+    }
+    if packet.prim_id != single.prim_id {
+        let [v0, v1, v2] = scene.triangles[packet.prim_id as usize];
+        let wr = WatertightRay::new(ray.origin.into(), ray.dir.into());
+        if wr.intersect(v0, v1, v2, ray.tmin, ray.tmax).map(|h| h.0) != Some(single.t) {
+            return Err(format!("not an exact tie: packet {packet:?}, single {single:?}"));
+        }
+        *ties += 1;
+    }
+    Ok(())
+}
+
+/// Runs at the device's own subgroup size with every packet width it allows.
+#[test]
+fn packets_match_single_rays_at_device_subgroup_size() {
+    let ctx = context();
+    let subgroup = ctx.info.subgroup_size;
+    if let Ok(expected) = std::env::var("KDTRACE_EXPECT_SUBGROUP") {
+        assert_eq!(subgroup.to_string(), expected, "{}", ctx.info);
+    }
+    let widths: Vec<u32> = [2, 4, 8, 16, 32].into_iter().filter(|&w| w <= subgroup).collect();
+    assert!(!widths.is_empty(), "{} has subgroups of {subgroup}: no packets to test", ctx.info);
+    for name in ["teapot", "q3_20kdm2", "cornell_box"] {
+        let path = scene_path(&format!("{name}.obj"));
+        let scene = Scene::load(&path).unwrap();
+        let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+        let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+        let camera = Camera::from_cameras_json(&scene_path("cameras.json"), name).unwrap().unwrap();
+        let (mut rays, _) = camera_rays_morton(&camera, 48, 40);
+        rays.extend(random_rays(&mut Rng(11), scene.bounds.min, scene.bounds.max, 1500));
+        check_scene(&mut tracer, &scene, &rays, &widths, name);
+    }
+    assert_validation_clean(&ctx);
+}
+
+/// lavapipe runs 4-wide subgroups with `LP_NATIVE_VECTOR_WIDTH=128`: run the test
+/// above again in a child process at that size.
+#[test]
+fn packets_match_single_rays_at_subgroup_size_4_on_lavapipe() {
+    if std::env::var("KDTRACE_EXPECT_SUBGROUP").is_ok() {
+        return; // the child itself
+    }
+    let ctx = context();
+    let lavapipe = ctx.info.name.contains("llvmpipe");
+    drop(ctx);
+    if !lavapipe {
+        eprintln!("not lavapipe: the 4-lane run applies to lavapipe only");
+        return;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "packets_match_single_rays_at_device_subgroup_size", "--nocapture"])
+        .env("LP_NATIVE_VECTOR_WIDTH", "128")
+        .env("KDTRACE_EXPECT_SUBGROUP", "4")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "4-lane run failed:\n{stdout}\n{stderr}");
+    assert!(stdout.contains("1 passed"), "the child ran no test:\n{stdout}");
+    assert!(stderr.contains("W=4"), "the child traced no 4-wide packets:\n{stderr}");
+}
+
+/// A packet wider than the subgroup is a clear error, not a wrong picture.
+#[test]
+fn packet_wider_than_subgroup_is_refused() {
+    let ctx = context();
+    let scene = Scene::load(&scene_path("cornell_box.obj")).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let too_wide = ctx.info.max_subgroup_size * 2;
+    let traversal = Traversal { packet_width: too_wide, ..Traversal::closest(Variant::Stack) };
+    let rays = [Ray::default()];
+    match tracer.trace(&rays, &TraceOptions { traversal, counters: false }) {
+        Err(kdtrace::Error::DeviceLimit(m)) => assert!(m.contains("packet width"), "{m}"),
+        Err(e) => panic!("unexpected error {e}"),
+        Ok(_) => panic!("packet width {too_wide} should be refused"),
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
+}
