@@ -10,6 +10,7 @@ pub mod raygen;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod sweep;
 pub mod trace;
 
 pub use error::{Error, Result};

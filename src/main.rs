@@ -33,6 +33,8 @@ enum Command {
     Rays(RaysArgs),
     /// Compare the traversal variants: rays/s, per-ray counters, hit agreement.
     Bench(BenchArgs),
+    /// Sweep packet variants × packet widths × subgroup sizes: table, CSV and PNG chart.
+    Subgroups(SubgroupsArgs),
     /// List the Vulkan devices and their subgroup properties.
     Info,
 }
@@ -95,6 +97,29 @@ impl TraversalArgs {
         traversal.validate()?;
         Ok(traversal)
     }
+}
+
+#[derive(clap::Args)]
+struct SubgroupsArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// Camera rays: image width and height.
+    #[arg(long, default_value_t = 256)]
+    width: u32,
+    #[arg(long, default_value_t = 192)]
+    height: u32,
+    /// Random rays.
+    #[arg(long, default_value_t = 50_000)]
+    random: usize,
+    /// Timed repetitions per cell (median reported, after a warm-up).
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// CSV output.
+    #[arg(long, default_value = "subgroups.csv")]
+    csv: PathBuf,
+    /// PNG chart output.
+    #[arg(long, default_value = "subgroups.png")]
+    png: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -436,6 +461,26 @@ fn bench(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
+fn subgroups(args: SubgroupsArgs) -> Result<()> {
+    let (scene, tree) = load_and_build(&args.scene)?;
+    let ctx = context()?;
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    let camera = default_camera(&args.scene, &scene)?;
+    let batches = [
+        ("camera", kdtrace::render::camera_rays_morton(&camera, args.width, args.height).0),
+        ("random", kdtrace::raygen::random_rays(&scene.bounds, args.random, 1)),
+    ];
+    let bar = spinner("sweeping".into());
+    let rows = kdtrace::sweep::run(&mut tracer, &batches, args.repeat, |what| bar.set_message(what.to_string()))?;
+    bar.finish_and_clear();
+    let title = format!("{} on {}", args.scene.display(), ctx.info.name);
+    println!("# kdtrace subgroups {title}\n\n{}", kdtrace::sweep::markdown_table(&rows));
+    kdtrace::sweep::write_csv(&args.csv, &rows)?;
+    kdtrace::sweep::plot_png(&args.png, &rows, &title)?;
+    eprintln!("wrote {} and {}", args.csv.display(), args.png.display());
+    Ok(())
+}
+
 fn stats(args: StatsArgs) -> Result<()> {
     let (scene, tree) = load_and_build(&args.scene)?;
     let s = &tree.stats;
@@ -519,6 +564,7 @@ fn main() -> Result<()> {
         Command::Stats(a) => stats(a),
         Command::Rays(a) => rays(a),
         Command::Bench(a) => bench(a),
+        Command::Subgroups(a) => subgroups(a),
         Command::Info => info(),
     }
 }
