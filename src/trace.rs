@@ -1,4 +1,76 @@
-//! The public tracing API: a scene uploaded to a device, traced in batches.
+//! The public tracing API: a scene on a device ([`Tracer`]), traced either by
+//! kdtrace itself ([`Tracer::trace`]: upload rays, submit, wait, read the hits
+//! back) or inside an engine's own command buffer ([`Tracer::record_trace`]).
+//! The traversal kernels implement Horn, Sugerman, Houston & Hanrahan,
+//! *Interactive k-D Tree GPU Raytracing* (I3D 2007), and kd-restart and
+//! kd-backtrack of Foley & Sugerman (2005); see [`Variant`].
+//!
+//! # Scene lifecycle
+//!
+//! 1. **Build** the kd-tree on the CPU with [`KdTree::build`] (SAH, Wald & Havran
+//!    2006), or **load** a prebuilt one: a [`KdTree`] is plain data (`nodes`,
+//!    `prim_indices`, `bounds`) that you may store and reassemble.
+//! 2. **Upload** it with [`Tracer::new`]: nodes, primitive indices and triangle
+//!    vertices go to device-local buffers. The tree's structure is checked first
+//!    ([`KdTree::check`]), so a corrupt prebuilt tree is an error, not a GPU fault.
+//!    This submits copies on the context's queue and waits for them.
+//! 3. **Replace** the scene with [`Tracer::replace_scene`]: same checks and upload;
+//!    pipelines are kept, the old buffers are freed, bindings made before are refused.
+//! 4. **Drop** the tracer: its buffers, pipelines and descriptor-set layouts are
+//!    destroyed and its allocations freed. Nothing else remains: kdtrace has no
+//!    global state, and descriptor sets live in the [`TraceBinding`]s you hold.
+//!
+//! # Recording into your command buffer
+//!
+//! [`Tracer::record_trace`] records one compute dispatch into `cmd` that reads
+//! `count` rays ([`Ray`], 32 bytes each) from a range of your buffer and writes
+//! `count` hits ([`Hit`], 16 bytes each) into a range of another (or of the same
+//! buffer, not overlapping). It never submits, waits or allocates memory, and it
+//! records no barriers: synchronisation is yours, as follows.
+//!
+//! - **Before**: make your writes of the rays available to the compute shader
+//!   stage, and finish earlier accesses of the hit range, e.g. a
+//!   `vkCmdPipelineBarrier` from the stage that wrote the rays (`COMPUTE_SHADER`
+//!   with `SHADER_WRITE`, `TRANSFER` with `TRANSFER_WRITE`, ...) to
+//!   `COMPUTE_SHADER` with `SHADER_READ | SHADER_WRITE`. Host writes to mapped
+//!   memory are made visible by the submission itself.
+//! - **After**: before anything reads the hits (or counters), a barrier from
+//!   `COMPUTE_SHADER`/`SHADER_WRITE` to the reader's stage and access
+//!   (`COMPUTE_SHADER`/`SHADER_READ`, `TRANSFER`/`TRANSFER_READ`, `HOST`/`HOST_READ`).
+//!   Before you overwrite the rays again, an execution dependency after `COMPUTE_SHADER`.
+//! - **State**: the dispatch binds kdtrace's compute pipeline, its descriptor set 0
+//!   and its push constants in `cmd`; rebind your own compute state after it.
+//! - **Queues**: `cmd` must come from a pool of a compute-capable queue family of
+//!   the context's device; buffers with exclusive sharing must be owned by that
+//!   family. The scene buffers need no barrier (their upload was waited for).
+//! - **Results**: hits are written as the kernel writes them: `prim_id` is a
+//!   triangle index or [`consts::PRIM_MISS`](crate::consts::PRIM_MISS),
+//!   [`consts::PRIM_INVALID`](crate::consts::PRIM_INVALID) or
+//!   [`consts::PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE) (a traversal that did not
+//!   finish: check for it; [`Tracer::trace`] turns it into `Error::Incomplete`).
+//!
+//! # Lifetimes
+//!
+//! The descriptor set of a recorded trace lives in the [`TraceBinding`] that
+//! `record_trace` returns. Until the command buffer has completed (or is reset
+//! without being submitted), keep alive: that binding, the [`Tracer`] (its scene
+//! buffers and pipeline), and your ray and hit buffers. Typically the binding goes
+//! into your per-frame "delete when this frame's fence signals" list. To avoid
+//! creating a descriptor set per frame, make a binding once with [`Tracer::bind`]
+//! and record it every frame with [`Tracer::record_binding`] (it may be recorded
+//! into any number of command buffers, also pending ones, since it is never
+//! rewritten). Do not call [`Tracer::replace_scene`] or drop the tracer while a
+//! recorded trace is pending on the GPU. A binding holds the context (an `Arc`),
+//! so drop bindings, tracers and the context before you destroy an adopted device.
+//!
+//! # Threads
+//!
+//! [`Tracer`] and [`TraceBinding`] are `Send + Sync`; methods that change the
+//! tracer take `&mut self`. Several tracers may share one [`GpuContext`] and be
+//! created, used and dropped on different threads at once: the context
+//! serialises its own queue submissions and command-pool use with mutexes
+//! (see [`GpuContext::queue_lock`] for sharing the queue with an engine).
+#![warn(missing_docs)]
 
 use std::sync::Arc;
 
@@ -8,12 +80,14 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
-    MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
+    BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS, BINDING_PRIM_INDICES,
+    BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES,
+    COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, TRACE_BINDINGS,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
-use crate::gpu::{shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
+use crate::gpu::{check_range, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{Counters, Traversal, Variant};
 use crate::kdtree::{KdNode, KdTree};
@@ -22,9 +96,13 @@ use crate::kdtree::{KdNode, KdTree};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct TraceParams {
+    /// xyz: the scene box's minimum corner (w unused).
     pub scene_min: [f32; 4],
+    /// xyz: the scene box's maximum corner (w unused).
     pub scene_max: [f32; 4],
+    /// Rays in this dispatch.
     pub ray_count: u32,
+    /// Padding to 48 bytes.
     pub pad: [u32; 3],
 }
 
@@ -53,6 +131,7 @@ impl TraceOptions {
 /// What `trace` returns.
 #[derive(Clone, Debug, Default)]
 pub struct TraceResult {
+    /// One hit per ray, in ray order.
     pub hits: Vec<Hit>,
     /// Per-ray counters when requested.
     pub counters: Option<Vec<Counters>>,
@@ -63,10 +142,13 @@ pub struct TraceResult {
 /// Rays per dispatch. Bounded by the storage-buffer range and workgroup count limits.
 const DEFAULT_CHUNK: usize = 1 << 20;
 
-/// A scene on a device, ready to trace: the kd-tree nodes, primitive indices and
-/// triangle vertices in device-local buffers.
-pub struct Tracer {
-    ctx: Arc<GpuContext>,
+/// Bytes of one ray, one hit and one ray's counters in the kernel's buffers.
+const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
+const HIT_BYTES: u64 = std::mem::size_of::<Hit>() as u64;
+const COUNTER_BYTES: u64 = COUNTERS_PER_RAY as u64 * 4;
+
+/// A scene's device buffers.
+struct SceneBuffers {
     nodes: Buffer,
     prim_indices: Buffer,
     triangles: Buffer,
@@ -75,18 +157,17 @@ pub struct Tracer {
     host_nodes: Vec<KdNode>,
     /// Parent links, node boxes and ropes, uploaded on first use by `backtrack`/`ropes`.
     links: Option<[Buffer; 3]>,
-    /// Bound in place of side buffers a variant does not read.
-    dummy: Buffer,
-    kernels: Vec<((Traversal, bool), Kernel)>,
-    chunk: usize,
 }
 
-impl Tracer {
-    /// Uploads `tree` (built over `triangles`) to the context's device.
-    pub fn new(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<Tracer> {
+impl SceneBuffers {
+    /// Checks `tree` over `triangles` against the device's limits and uploads it.
+    fn upload(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<SceneBuffers> {
         if triangles.is_empty() || tree.bounds.is_empty() {
             return Err(Error::InvalidInput("the scene has no triangles that can be hit".into()));
         }
+        tree.check(triangles.len()).map_err(|e| {
+            Error::InvalidInput(format!("the kd-tree does not fit its {} triangles: {e}", triangles.len()))
+        })?;
         let verts: Vec<f32> = triangles.iter().flat_map(|t| t.iter().flat_map(|v| v.to_array())).collect();
         let limit = ctx.info.max_storage_buffer_range;
         let sizes = [
@@ -103,33 +184,115 @@ impl Tracer {
             }
         }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let nodes = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), usage, "kd-tree nodes")?;
-        let prim_indices = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?;
-        let triangles = Buffer::with_data(ctx, bytemuck::cast_slice(&verts), usage, "triangle vertices")?;
-        let dummy = Buffer::new(ctx, 4, usage, MemoryLocation::GpuOnly, "unused side buffer")?;
-        // Rays (32 B), hits (16 B) and counters per chunk must fit the storage range,
-        // and the dispatch must fit the workgroup count limit.
-        let per_ray = (COUNTERS_PER_RAY * 4) as u64;
-        let by_range = (limit / per_ray.max(32)) as usize;
-        let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
-        let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
-        Ok(Tracer {
-            ctx: ctx.clone(),
-            nodes,
-            prim_indices,
-            triangles,
+        Ok(SceneBuffers {
+            nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), usage, "kd-tree nodes")?,
+            prim_indices: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,
+            triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&verts), usage, "triangle vertices")?,
             bounds: tree.bounds,
             host_nodes: tree.nodes.clone(),
             links: None,
-            dummy,
-            kernels: Vec::new(),
-            chunk,
         })
+    }
+}
+
+/// A scene on a device, ready to trace: the kd-tree nodes, primitive indices and
+/// triangle vertices in device-local buffers, and the trace pipelines compiled so
+/// far (one per traversal variant and counter setting, made on first use).
+///
+/// See the [module docs](self) for the scene lifecycle, the barrier and lifetime
+/// contract of [`Tracer::record_trace`], and thread safety (`Send + Sync`).
+pub struct Tracer {
+    ctx: Arc<GpuContext>,
+    scene: SceneBuffers,
+    /// Incremented by `replace_scene`; bindings of an older scene are refused.
+    generation: u64,
+    /// Bound in place of buffers a dispatch does not use (side buffers, counters).
+    dummy: Buffer,
+    kernels: Vec<((Traversal, bool), Kernel)>,
+    chunk: usize,
+}
+
+/// The descriptor set of one traced configuration: the tracer's scene buffers,
+/// your ray, hit (and counter) ranges, and the pipeline of one [`TraceOptions`].
+/// Made by [`Tracer::bind`] or returned by [`Tracer::record_trace`]; recorded
+/// with [`Tracer::record_binding`].
+///
+/// Dropping it destroys its descriptor set, so keep it until every command buffer
+/// it was recorded into has completed. It is never rewritten, so it may be
+/// recorded into several command buffers, pending ones included.
+#[must_use = "the descriptor set must live until the command buffer that uses it completes"]
+pub struct TraceBinding {
+    set: BufferSet,
+    kernel: usize,
+    pipeline: vk::Pipeline,
+    generation: u64,
+    capacity: u32,
+    options: TraceOptions,
+}
+
+impl TraceBinding {
+    /// The most rays one recording of this binding may trace: the fewest whole
+    /// rays, hits (and counter records) its ranges hold.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// The options it was bound with.
+    pub fn options(&self) -> &TraceOptions {
+        &self.options
+    }
+}
+
+impl std::fmt::Debug for TraceBinding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TraceBinding")
+            .field("set", &self.set.set)
+            .field("capacity", &self.capacity)
+            .field("options", &self.options)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Tracer {
+    /// Uploads `tree` (built over `triangles`, or loaded) to the context's device.
+    /// Submits the copies on the context's queue and waits for them.
+    ///
+    /// Errors: `Error::InvalidInput` for an empty scene or a tree whose structure
+    /// does not fit `triangles` ([`KdTree::check`]); `Error::DeviceLimit` when a
+    /// buffer exceeds `maxStorageBufferRange`.
+    pub fn new(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<Tracer> {
+        let scene = SceneBuffers::upload(ctx, tree, triangles)?;
+        let dummy =
+            Buffer::new(ctx, 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly, "unused binding")?;
+        // Rays (32 B), hits (16 B) and counters per chunk must fit the storage range,
+        // and the dispatch must fit the workgroup count limit.
+        let limit = ctx.info.max_storage_buffer_range;
+        let by_range = (limit / COUNTER_BYTES.max(RAY_BYTES)) as usize;
+        let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
+        let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
+        Ok(Tracer { ctx: ctx.clone(), scene, generation: 0, dummy, kernels: Vec::new(), chunk })
+    }
+
+    /// Replaces the scene with `tree` over `triangles` (same checks and upload as
+    /// [`Tracer::new`]); compiled pipelines are kept. On error the old scene stays.
+    /// Bindings made before are refused afterwards ([`Tracer::bind`] again).
+    ///
+    /// No trace recorded with this tracer may be pending on the GPU: the old scene
+    /// buffers are destroyed here.
+    pub fn replace_scene(&mut self, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<()> {
+        self.scene = SceneBuffers::upload(&self.ctx, tree, triangles)?;
+        self.generation += 1;
+        Ok(())
     }
 
     /// The context this tracer runs on.
     pub fn context(&self) -> &Arc<GpuContext> {
         &self.ctx
+    }
+
+    /// The box around the scene's triangles (rays are clipped to it).
+    pub fn bounds(&self) -> Aabb {
+        self.scene.bounds
     }
 
     /// Rays traced per dispatch.
@@ -142,12 +305,24 @@ impl Tracer {
         self.chunk = rays.clamp(1, self.chunk.max(1));
     }
 
+    /// Compiles the pipeline of `options` and, for `backtrack` and `ropes`, uploads
+    /// their side buffers (parent links, node boxes, ropes; Foley & Sugerman 2005,
+    /// Popov et al. 2007), which submits on the context's queue and waits. Call it
+    /// at load time so that [`Tracer::record_trace`] finds everything ready.
+    pub fn prepare(&mut self, options: &TraceOptions) -> Result<()> {
+        self.kernel(options.traversal, options.counters)?;
+        if options.traversal.variant.uses_links() {
+            self.ensure_links()?;
+        }
+        Ok(())
+    }
+
     /// Uploads the side buffers of `backtrack` and `ropes` once.
     fn ensure_links(&mut self) -> Result<()> {
-        if self.links.is_some() {
+        if self.scene.links.is_some() {
             return Ok(());
         }
-        let links = TreeLinks::new(&self.host_nodes, self.bounds);
+        let links = TreeLinks::new(&self.scene.host_nodes, self.scene.bounds);
         let limit = self.ctx.info.max_storage_buffer_range;
         if std::mem::size_of_val(links.boxes.as_slice()) as u64 > limit {
             return Err(Error::DeviceLimit(format!(
@@ -156,7 +331,7 @@ impl Tracer {
             )));
         }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        self.links = Some([
+        self.scene.links = Some([
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.parents), usage, "parents")?,
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.boxes), usage, "node boxes")?,
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.ropes), usage, "ropes")?,
@@ -166,11 +341,19 @@ impl Tracer {
 
     fn kernel(&mut self, traversal: Traversal, counters: bool) -> Result<usize> {
         traversal.validate()?;
-        // Variants that ignore the stack size share one pipeline.
+        // Variants that ignore the stack size or packets share one pipeline.
         let key = Traversal {
             stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
+            packet_width: if traversal.uses_packets() { traversal.packet_width } else { 1 },
             ..traversal
         };
+        let subgroup = key.subgroup_size.unwrap_or(self.ctx.info.subgroup_size);
+        if key.packet_width > subgroup || TRACE_WORKGROUP_SIZE % subgroup != 0 {
+            return Err(Error::DeviceLimit(format!(
+                "packet width {} needs subgroups of at least that many lanes (and dividing the workgroup of {}); {} runs subgroups of {}",
+                key.packet_width, TRACE_WORKGROUP_SIZE, self.ctx.info.name, subgroup
+            )));
+        }
         if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (key, counters)) {
             return Ok(i);
         }
@@ -181,17 +364,246 @@ impl Tracer {
                 spirv: shaders::TRACE,
                 bindings: TRACE_BINDINGS,
                 push_constant_size: std::mem::size_of::<TraceParams>() as u32,
-                spec_constants: &[key.variant.id(), counters as u32, key.stack_size, key.any_hit as u32],
+                spec_constants: &[
+                    key.variant.id(),
+                    counters as u32,
+                    key.stack_size,
+                    key.any_hit as u32,
+                    key.packet_width,
+                ],
                 workgroup_size: TRACE_WORKGROUP_SIZE,
-                required_subgroup_size: None,
+                required_subgroup_size: key.subgroup_size,
+                // Packets decide by ballots.
+                required_subgroup_operations: if key.packet_width > 1 {
+                    vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
+                } else {
+                    vk::SubgroupFeatureFlags::empty()
+                },
             },
         )?;
         self.kernels.push(((key, counters), kernel));
         Ok(self.kernels.len() - 1)
     }
 
+    /// Makes the descriptor set that traces rays from `rays` into `hits` (and
+    /// per-ray counters into `counters`, [`COUNTERS_PER_RAY`] u32 each, when
+    /// `options.counters` is on: a counter range is required then, and refused
+    /// otherwise) with the traversal of `options`, for [`Tracer::record_binding`].
+    /// Compiles the pipeline on first use; for `backtrack` and `ropes` it may
+    /// upload side buffers (see [`Tracer::prepare`]), which submits and waits.
+    ///
+    /// Errors: `Error::DeviceLimit` for an offset that is not a multiple of
+    /// `minStorageBufferOffsetAlignment` or a range beyond `maxStorageBufferRange`;
+    /// `Error::InvalidInput` for empty or overlapping ranges, a range too small for
+    /// one ray, or a counter range that does not match `options.counters`.
+    ///
+    /// # Safety
+    /// Each range's buffer must be a live buffer of the context's device, created
+    /// with `STORAGE_BUFFER` usage, bound to memory and at least `offset + range`
+    /// bytes long, and it must stay alive while the binding is used by any
+    /// command buffer.
+    pub unsafe fn bind(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        counters: Option<BufferRange>,
+        options: &TraceOptions,
+    ) -> Result<TraceBinding> {
+        // SAFETY: forwarded from the caller.
+        unsafe { self.bind_inner(rays, hits, counters, options, true) }
+    }
+
+    /// `bind`; `upload`: whether missing side buffers may be uploaded (submits).
+    unsafe fn bind_inner(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        counters: Option<BufferRange>,
+        options: &TraceOptions,
+        upload: bool,
+    ) -> Result<TraceBinding> {
+        match (options.counters, counters.is_some()) {
+            (true, false) => {
+                return Err(Error::InvalidInput(
+                    "TraceOptions::counters is on but no counter range was given (Tracer::bind takes one)".into(),
+                ))
+            }
+            (false, true) => {
+                return Err(Error::InvalidInput("a counter range was given but TraceOptions::counters is off".into()))
+            }
+            _ => {}
+        }
+        let kernel = self.kernel(options.traversal, options.counters)?;
+        let uses_links = options.traversal.variant.uses_links();
+        if uses_links && self.scene.links.is_none() {
+            if !upload {
+                return Err(Error::InvalidInput(format!(
+                    "the {} traversal needs side buffers that are not uploaded yet, and recording never submits: \
+                     call Tracer::prepare with these options first",
+                    options.traversal.variant
+                )));
+            }
+            self.ensure_links()?;
+        }
+
+        let mut named = vec![("rays", rays, RAY_BYTES), ("hits", hits, HIT_BYTES)];
+        named.extend(counters.map(|c| ("counters", c, COUNTER_BYTES)));
+        for (what, range, _) in &named {
+            check_range(&self.ctx, what, range)?;
+        }
+        for (i, (a, ra, _)) in named.iter().enumerate() {
+            for (b, rb, _) in &named[i + 1..] {
+                if ra.overlaps(rb) {
+                    return Err(Error::InvalidInput(format!(
+                        "the {a} range ({}..{}) overlaps the {b} range ({}..{}) of the same buffer",
+                        ra.offset,
+                        ra.end(),
+                        rb.offset,
+                        rb.end()
+                    )));
+                }
+            }
+        }
+        let capacity = named.iter().map(|(_, r, bytes)| r.range / bytes).min().unwrap_or(0);
+        if capacity == 0 {
+            let (what, r, bytes) = named.iter().find(|(_, r, bytes)| r.range < *bytes).unwrap_or(&named[0]);
+            return Err(Error::InvalidInput(format!(
+                "the {what} range of {} bytes holds no whole record of {bytes} bytes",
+                r.range
+            )));
+        }
+
+        let scene = &self.scene;
+        let mut ranges = [BufferRange::whole(&self.dummy); TRACE_BINDINGS as usize];
+        ranges[BINDING_NODES as usize] = BufferRange::whole(&scene.nodes);
+        ranges[BINDING_PRIM_INDICES as usize] = BufferRange::whole(&scene.prim_indices);
+        ranges[BINDING_TRIANGLES as usize] = BufferRange::whole(&scene.triangles);
+        ranges[BINDING_RAYS as usize] = rays;
+        ranges[BINDING_HITS as usize] = hits;
+        if let Some(c) = counters {
+            ranges[BINDING_COUNTERS as usize] = c;
+        }
+        if let (true, Some([parents, boxes, ropes])) = (uses_links, &scene.links) {
+            ranges[BINDING_PARENTS as usize] = BufferRange::whole(parents);
+            ranges[BINDING_NODE_BOXES as usize] = BufferRange::whole(boxes);
+            ranges[BINDING_ROPES as usize] = BufferRange::whole(ropes);
+        }
+        let k = &self.kernels[kernel].1;
+        // SAFETY: the scene and dummy buffers are this tracer's; the caller vouches
+        // for `rays`, `hits` and `counters`.
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, k, &ranges)? };
+        Ok(TraceBinding {
+            set,
+            kernel,
+            pipeline: k.pipeline,
+            generation: self.generation,
+            capacity: capacity.min(u32::MAX as u64) as u32,
+            options: *options,
+        })
+    }
+
+    /// The kernel of `binding`, after checking it belongs to this tracer's current
+    /// scene and holds `count` rays.
+    fn check_binding(&self, binding: &TraceBinding, count: u32) -> Result<&Kernel> {
+        let kernel = match self.kernels.get(binding.kernel) {
+            Some((_, k)) if k.pipeline == binding.pipeline => k,
+            _ => return Err(Error::InvalidInput("the binding was made by another tracer".into())),
+        };
+        if binding.generation != self.generation {
+            return Err(Error::InvalidInput(
+                "the binding was made before Tracer::replace_scene: bind the new scene again".into(),
+            ));
+        }
+        if count > binding.capacity {
+            return Err(Error::InvalidInput(format!(
+                "{count} rays exceed the {} rays the binding's ray, hit and counter ranges hold",
+                binding.capacity
+            )));
+        }
+        Ok(kernel)
+    }
+
+    /// Records the dispatch of a checked binding.
+    ///
+    /// # Safety
+    /// `cmd` is recording; `kernel` and `binding` passed `check_binding` for `count`.
+    unsafe fn record_unchecked(&self, cmd: vk::CommandBuffer, kernel: &Kernel, binding: &TraceBinding, count: u32) {
+        let b = self.scene.bounds;
+        let params = TraceParams {
+            scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
+            scene_max: [b.max.x, b.max.y, b.max.z, 0.0],
+            ray_count: count,
+            pad: [0; 3],
+        };
+        // SAFETY: forwarded from the caller.
+        unsafe { kernel.record_dispatch(cmd, binding.set.set, bytemuck::bytes_of(&params), count) };
+    }
+
+    /// Records the trace of the first `count` rays of `binding`'s ray range into
+    /// `cmd` (nothing for `count == 0`). Never submits or waits; see the [module
+    /// docs](self) for the barriers expected before and after and the state it
+    /// changes in `cmd`.
+    ///
+    /// Errors (nothing is recorded then): `Error::InvalidInput` when `binding` was
+    /// made by another tracer or before [`Tracer::replace_scene`], or `count`
+    /// exceeds [`TraceBinding::capacity`].
+    ///
+    /// # Safety
+    /// `cmd` must be a command buffer of the context's device in the recording
+    /// state, outside a render pass, from a pool of a compute-capable queue family.
+    /// `binding`, this tracer and the buffers of the binding's ranges must stay
+    /// alive (and the scene unreplaced) until `cmd` has completed.
+    pub unsafe fn record_binding(&self, cmd: vk::CommandBuffer, binding: &TraceBinding, count: u32) -> Result<()> {
+        let kernel = self.check_binding(binding, count)?;
+        if count > 0 {
+            // SAFETY: checked above; the caller vouches for `cmd` and lifetimes.
+            unsafe { self.record_unchecked(cmd, kernel, binding, count) };
+        }
+        Ok(())
+    }
+
+    /// Records into your command buffer `cmd` the trace of `count` rays read from
+    /// `rays` into hits written to `hits` (`count` × 32 and × 16 bytes at least),
+    /// with the traversal of `options`: [`Tracer::bind`] then
+    /// [`Tracer::record_binding`]. Counters are off in this mode
+    /// (`options.counters` must be false; `bind` takes a counter range). Never
+    /// submits or waits: a `backtrack` or `ropes` traversal needs
+    /// [`Tracer::prepare`] first. See the [module docs](self) for the barriers
+    /// expected before and after.
+    ///
+    /// Returns the binding holding the descriptor set: keep it until `cmd` completes.
+    ///
+    /// # Safety
+    /// As [`Tracer::bind`] for the ranges and [`Tracer::record_binding`] for `cmd`:
+    /// valid handles of the context's device, `cmd` recording outside a render
+    /// pass, and the buffers, the returned binding and this tracer alive until
+    /// `cmd` has completed.
+    pub unsafe fn record_trace(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        rays: BufferRange,
+        hits: BufferRange,
+        count: u32,
+        options: &TraceOptions,
+    ) -> Result<TraceBinding> {
+        if options.counters {
+            return Err(Error::InvalidInput(
+                "record_trace writes no counters: use Tracer::bind with a counter range, then record_binding".into(),
+            ));
+        }
+        // SAFETY: forwarded from the caller.
+        unsafe {
+            let binding = self.bind_inner(rays, hits, None, options, false)?;
+            self.record_binding(cmd, &binding, count)?;
+            Ok(binding)
+        }
+    }
+
     /// Traces `rays` (any number: they go in chunks) and returns the closest hit of
     /// each. Rays that did not finish traversal make this an `Error::Incomplete`.
+    /// The convenient path: kdtrace uploads the rays, submits on the context's
+    /// queue, waits and reads the hits back (built on [`Tracer::bind`] and
+    /// [`Tracer::record_binding`]).
     pub fn trace(&mut self, rays: &[Ray], options: &TraceOptions) -> Result<TraceResult> {
         self.trace_with_progress(rays, options, |_| {})
     }
@@ -203,54 +615,25 @@ impl Tracer {
         options: &TraceOptions,
         mut progress: impl FnMut(usize),
     ) -> Result<TraceResult> {
-        let kernel_index = self.kernel(options.traversal, options.counters)?;
-        if options.traversal.variant.uses_links() {
-            self.ensure_links()?;
-        }
         let chunk = self.chunk.min(rays.len()).max(1);
         let ctx = self.ctx.clone();
-        let mut ray_buf = Buffer::new(
-            &ctx,
-            (chunk * 32) as u64,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::CpuToGpu,
-            "rays",
-        )?;
-        let hit_buf = Buffer::new(
-            &ctx,
-            (chunk * 16) as u64,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::GpuToCpu,
-            "hits",
-        )?;
-        let counter_bytes = if options.counters { chunk * COUNTERS_PER_RAY as usize * 4 } else { 4 };
-        let counter_buf = Buffer::new(
-            &ctx,
-            counter_bytes as u64,
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            MemoryLocation::GpuToCpu,
-            "counters",
-        )?;
-        let kernel = &self.kernels[kernel_index].1;
-        let [parents, boxes, ropes] = match (&self.links, options.traversal.variant.uses_links()) {
-            (Some([p, b, r]), true) => [p, b, r],
-            _ => [&self.dummy; 3],
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let mut ray_buf = Buffer::new(&ctx, chunk as u64 * RAY_BYTES, usage, MemoryLocation::CpuToGpu, "rays")?;
+        let hit_buf = Buffer::new(&ctx, chunk as u64 * HIT_BYTES, usage, MemoryLocation::GpuToCpu, "hits")?;
+        let counter_buf = match options.counters {
+            true => Some(Buffer::new(&ctx, chunk as u64 * COUNTER_BYTES, usage, MemoryLocation::GpuToCpu, "counters")?),
+            false => None,
         };
-        let set = BufferSet::new(
-            &ctx,
-            kernel,
-            &[
-                &self.nodes,
-                &self.prim_indices,
-                &self.triangles,
-                &ray_buf,
-                &hit_buf,
-                &counter_buf,
-                parents,
-                boxes,
-                ropes,
-            ],
-        )?;
+        // SAFETY: kdtrace's own storage buffers, alive until after the last
+        // submission below, which is waited for.
+        let binding = unsafe {
+            self.bind(
+                BufferRange::whole(&ray_buf),
+                BufferRange::whole(&hit_buf),
+                counter_buf.as_ref().map(BufferRange::whole),
+                options,
+            )?
+        };
         let timestamps = Timestamps::new(&ctx, 2)?;
 
         let mut result = TraceResult {
@@ -258,24 +641,19 @@ impl Tracer {
             counters: options.counters.then(|| Vec::with_capacity(rays.len())),
             gpu_seconds: timestamps.as_ref().map(|_| 0.0),
         };
-        let b = self.bounds;
         for (chunk_index, batch) in rays.chunks(chunk).enumerate() {
             ray_buf.write(0, bytemuck::cast_slice(batch))?;
-            let params = TraceParams {
-                scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
-                scene_max: [b.max.x, b.max.y, b.max.z, 0.0],
-                ray_count: batch.len() as u32,
-                pad: [0; 3],
-            };
+            let count = batch.len() as u32;
+            let kernel = self.check_binding(&binding, count)?;
             ctx.submit_and_wait(|cmd| {
-                // SAFETY: `cmd` is recording; the set's buffers outlive the submission,
-                // which `submit_and_wait` waits for.
+                // SAFETY: `cmd` is recording; the binding was checked; its buffers
+                // outlive the submission, which `submit_and_wait` waits for.
                 unsafe {
                     if let Some(ts) = &timestamps {
                         ts.record_reset(cmd);
                         ts.record(cmd, 0);
                     }
-                    kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), batch.len() as u32);
+                    self.record_unchecked(cmd, kernel, &binding, count);
                     if let Some(ts) = &timestamps {
                         ts.record(cmd, 1);
                     }
@@ -297,15 +675,14 @@ impl Tracer {
             if let (Some(ts), Some(total)) = (&timestamps, result.gpu_seconds.as_mut()) {
                 *total += ts.seconds_between(0, 1)?;
             }
-            let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * 16)?);
+            let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * HIT_BYTES as usize)?);
             if let Some(first) = hits.iter().position(|h| h.prim_id == PRIM_INCOMPLETE) {
                 let count = hits.iter().filter(|h| h.prim_id == PRIM_INCOMPLETE).count();
                 return Err(Error::Incomplete { count, first: chunk_index * chunk + first, cap: MAX_TRAVERSAL_STEPS });
             }
             result.hits.extend_from_slice(hits);
-            if let Some(out) = result.counters.as_mut() {
-                let raw: &[u32] =
-                    bytemuck::cast_slice(counter_buf.read(0, batch.len() * COUNTERS_PER_RAY as usize * 4)?);
+            if let (Some(out), Some(counter_buf)) = (result.counters.as_mut(), &counter_buf) {
+                let raw: &[u32] = bytemuck::cast_slice(counter_buf.read(0, batch.len() * COUNTER_BYTES as usize)?);
                 out.extend(raw.chunks_exact(COUNTERS_PER_RAY as usize).map(|c| Counters {
                     nodes: c[COUNTER_NODES as usize],
                     leaves: c[COUNTER_LEAVES as usize],

@@ -2,13 +2,67 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use ash::vk;
-use common::{assert_validation_clean, context};
+use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use gpu_allocator::MemoryLocation;
-use kdtrace::gpu::{Buffer, ContextOptions, GpuContext, Validation};
+use kdtrace::gpu::{Buffer, BufferSet, ContextOptions, GpuContext, Kernel, Timestamps, Validation};
 use kdtrace::kdtree::{BuildConfig, KdTree};
-use kdtrace::trace::Tracer;
+use kdtrace::scene::Scene;
+use kdtrace::trace::{TraceBinding, TraceOptions, Tracer};
 use kdtrace::Error;
+
+/// What the docs promise: contexts, tracers and buffers may cross threads.
+#[test]
+fn public_types_are_send_and_sync() {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<GpuContext>();
+    send_sync::<Arc<GpuContext>>();
+    send_sync::<Tracer>();
+    send_sync::<TraceBinding>();
+    send_sync::<Buffer>();
+    send_sync::<BufferSet>();
+    send_sync::<Kernel>();
+    send_sync::<Timestamps>();
+}
+
+#[test]
+fn several_tracers_on_two_threads_release_everything() {
+    let ctx = context();
+    let scene = Scene::load(&scene_path("cornell_box.obj")).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let rays = random_rays(&mut Rng(11), scene.bounds.min, scene.bounds.max, 200);
+    let options = TraceOptions::default();
+    let expected = Tracer::new(&ctx, &tree, &scene.triangles).unwrap().trace(&rays, &options).unwrap().hits;
+    // Tracers made on one thread and dropped on another, and several alive at once on each.
+    let (sender, receiver) = std::sync::mpsc::channel::<Tracer>();
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            for _ in 0..3 {
+                let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+                assert_eq!(tracer.trace(&rays, &options).unwrap().hits, expected);
+                sender.send(tracer).unwrap();
+            }
+            drop(sender);
+        });
+        s.spawn(|| {
+            let mut mine = vec![Tracer::new(&ctx, &tree, &scene.triangles).unwrap()];
+            for mut tracer in receiver {
+                assert_eq!(tracer.trace(&rays, &options).unwrap().hits, expected);
+                mine.push(tracer);
+            }
+            for tracer in &mut mine {
+                assert_eq!(tracer.trace(&rays, &options).unwrap().hits, expected);
+            }
+        });
+    });
+    assert_eq!(Arc::strong_count(&ctx), 1, "every tracer released its context");
+    let report = ctx.allocator().lock().unwrap().generate_report();
+    let names: Vec<&str> = report.allocations.iter().map(|a| a.name.as_str()).collect();
+    assert!(names.is_empty(), "allocations left behind: {names:?}");
+    assert_validation_clean(&ctx);
+}
 
 #[test]
 fn validation_messages_are_caught() {

@@ -9,12 +9,55 @@ use gpu_allocator::MemoryLocation;
 use super::GpuContext;
 use crate::error::{Error, Result, VkContext};
 
-/// A buffer and its memory. Host-visible buffers (`CpuToGpu`, `GpuToCpu`) stay mapped.
+/// A buffer and its memory, from the context's allocator. Host-visible buffers
+/// (`CpuToGpu`, `GpuToCpu`) stay mapped. Dropping it destroys the buffer and frees
+/// its allocation, so no pending GPU work may still use it then.
+///
+/// `Buffer` is `Send + Sync` (reads of the mapping take `&self`, writes `&mut self`).
 pub struct Buffer {
+    /// The Vulkan buffer.
     pub buffer: vk::Buffer,
+    /// Its size in bytes.
     pub size: u64,
     allocation: Option<Allocation>,
     ctx: Arc<GpuContext>,
+}
+
+/// A byte range of a storage buffer, as one descriptor binds it: `range` bytes
+/// from `offset` of `buffer`. `offset` must be a multiple of the device's
+/// `minStorageBufferOffsetAlignment` ([`super::DeviceInfo::min_storage_buffer_offset_alignment`])
+/// and `range` at most `maxStorageBufferRange`; users of a range check both and
+/// report a clear error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BufferRange {
+    /// A buffer created with `vk::BufferUsageFlags::STORAGE_BUFFER`.
+    pub buffer: vk::Buffer,
+    /// Start of the range in bytes.
+    pub offset: u64,
+    /// Length of the range in bytes (not `vk::WHOLE_SIZE`).
+    pub range: u64,
+}
+
+impl BufferRange {
+    /// `range` bytes from `offset` of `buffer`.
+    pub fn new(buffer: vk::Buffer, offset: u64, range: u64) -> Self {
+        BufferRange { buffer, offset, range }
+    }
+
+    /// All of a kdtrace [`Buffer`].
+    pub fn whole(buffer: &Buffer) -> Self {
+        BufferRange { buffer: buffer.buffer, offset: 0, range: buffer.size }
+    }
+
+    /// One past the last byte (saturating).
+    pub fn end(&self) -> u64 {
+        self.offset.saturating_add(self.range)
+    }
+
+    /// True when both ranges are of the same buffer and share a byte.
+    pub fn overlaps(&self, other: &BufferRange) -> bool {
+        self.buffer == other.buffer && self.offset < other.end() && other.offset < self.end()
+    }
 }
 
 impl Buffer {
@@ -107,8 +150,9 @@ impl Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
-        // SAFETY: the owner guarantees no pending GPU work uses the buffer
-        // (every submission here waits for completion).
+        // SAFETY: the owner guarantees no pending GPU work uses the buffer: kdtrace's
+        // own submissions wait for completion, and traces recorded into a caller's
+        // command buffer must complete before the tracer is dropped (trace.rs docs).
         unsafe { self.ctx.device.destroy_buffer(self.buffer, None) };
         if let Some(a) = self.allocation.take() {
             let _ = self.ctx.allocator().lock().unwrap_or_else(|p| p.into_inner()).free(a);

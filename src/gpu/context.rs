@@ -1,5 +1,6 @@
-//! The Vulkan context: instance, device, queue and allocator. Created headless
-//! here; the embedding issue adds adoption of an engine's own objects.
+//! The Vulkan context: instance, device, queue and allocator, either created
+//! headless ([`GpuContext::headless`], for tools and tests) or adopted from an
+//! engine that owns them ([`GpuContext::adopt`]).
 
 use std::ffi::{c_void, CStr, CString};
 use std::mem::ManuallyDrop;
@@ -13,6 +14,7 @@ use crate::error::{Error, Result, VkContext};
 /// Whether to enable `VK_LAYER_KHRONOS_validation`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Validation {
+    /// Never.
     Off,
     /// On when the layer is installed (tests use this).
     IfAvailable,
@@ -25,6 +27,7 @@ pub enum Validation {
 pub struct ContextOptions {
     /// A device index or a case-insensitive name substring; `None` picks the best device.
     pub device: Option<String>,
+    /// Whether to enable the validation layer (and collect its messages).
     pub validation: Validation,
 }
 
@@ -44,16 +47,33 @@ impl ContextOptions {
 /// What the library needs to know about the device.
 #[derive(Clone, Debug)]
 pub struct DeviceInfo {
+    /// `VkPhysicalDeviceProperties::deviceName`.
     pub name: String,
+    /// Driver name and version string (`VkPhysicalDeviceDriverProperties`).
     pub driver: String,
+    /// Discrete, integrated, virtual or CPU (lavapipe).
     pub device_type: vk::PhysicalDeviceType,
+    /// The device's Vulkan version (`vk::make_api_version` encoding).
     pub api_version: u32,
+    /// The default subgroup size.
     pub subgroup_size: u32,
+    /// Smallest subgroup size a kernel may require (= `subgroup_size` without size control).
     pub min_subgroup_size: u32,
+    /// Largest subgroup size a kernel may require (= `subgroup_size` without size control).
     pub max_subgroup_size: u32,
+    /// Whether `subgroupSizeControl` and `computeFullSubgroups` are enabled on the
+    /// device, so that a kernel may require a subgroup size.
     pub subgroup_size_control: bool,
+    /// Subgroup operations supported in compute shaders (empty when the compute
+    /// stage has no subgroup support).
+    pub subgroup_operations: vk::SubgroupFeatureFlags,
+    /// `maxStorageBufferRange`: the largest range one storage-buffer descriptor may bind.
     pub max_storage_buffer_range: u64,
+    /// `minStorageBufferOffsetAlignment`: storage-buffer descriptor offsets must be multiples of it.
+    pub min_storage_buffer_offset_alignment: u64,
+    /// `maxComputeWorkGroupCount[0]`.
     pub max_workgroup_count_x: u32,
+    /// `maxMemoryAllocationSize` (Vulkan 1.1 maintenance3).
     pub max_memory_allocation_size: u64,
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period_ns: Option<f64>,
@@ -83,17 +103,94 @@ struct Debug {
     messages: Box<Mutex<Vec<String>>>,
 }
 
-/// A Vulkan device with one compute queue and a shared allocator.
-pub struct GpuContext {
-    _entry: ash::Entry,
+/// An engine's own Vulkan objects, for [`GpuContext::adopt`]: kdtrace then runs on
+/// them and never creates an instance or a device of its own.
+///
+/// The device must have been created with the features of [`required_features`]
+/// (today `shaderFloat64`, for the exact fallback of the watertight triangle
+/// test) from an instance created with `apiVersion` 1.2 or later (the kernels are
+/// SPIR-V 1.5), and `queue_family` must support compute.
+pub struct AdoptDesc {
+    /// The instance `physical_device` belongs to.
     pub instance: ash::Instance,
+    /// The physical device of `device`.
     pub physical_device: vk::PhysicalDevice,
+    /// The engine's device.
     pub device: ash::Device,
-    pub queue: vk::Queue,
+    /// A queue family of `device` with compute support; kdtrace creates its command
+    /// pool (for uploads and [`crate::trace::Tracer::trace`]) on it.
     pub queue_family: u32,
+    /// A queue of `queue_family`. kdtrace submits to it only in calls that say so
+    /// (scene uploads, `Tracer::trace`), never while recording into your command buffers.
+    pub queue: vk::Queue,
+    /// `vkQueueSubmit` needs the queue externally synchronised. kdtrace locks this
+    /// mutex around each of its submissions: pass the mutex your engine holds around
+    /// its own submissions to `queue`. `None`: kdtrace makes its own, and you must
+    /// not use `queue` while a kdtrace call that submits is running.
+    pub queue_lock: Option<Arc<Mutex<()>>>,
+    /// The allocator every kdtrace buffer comes from (shared with the engine; it
+    /// must have been created for this instance, physical device and device).
+    pub allocator: Arc<Mutex<Allocator>>,
+    /// The core features `device` was created with (`VkDeviceCreateInfo::pEnabledFeatures`,
+    /// or `VkPhysicalDeviceFeatures2::features`): checked against [`required_features`].
+    pub enabled_features: vk::PhysicalDeviceFeatures,
+    /// Whether `subgroupSizeControl` and `computeFullSubgroups` were enabled
+    /// (Vulkan 1.3 features). Only kernels that require a subgroup size need them.
+    pub subgroup_size_control: bool,
+}
+
+impl std::fmt::Debug for AdoptDesc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AdoptDesc")
+            .field("instance", &self.instance.handle())
+            .field("physical_device", &self.physical_device)
+            .field("device", &self.device.handle())
+            .field("queue_family", &self.queue_family)
+            .field("queue", &self.queue)
+            .field("queue_lock", &self.queue_lock.is_some())
+            .field("enabled_features", &self.enabled_features)
+            .field("subgroup_size_control", &self.subgroup_size_control)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The core device features kdtrace's kernels need: `shaderFloat64` (the exact
+/// fallback of the watertight triangle test, Woop, Benthin & Wald 2013). Enable at
+/// least these when you create a device for [`GpuContext::adopt`].
+pub fn required_features() -> vk::PhysicalDeviceFeatures {
+    vk::PhysicalDeviceFeatures::default().shader_float64(true)
+}
+
+/// A Vulkan device with one compute queue and a shared allocator: the device
+/// every kdtrace object runs on.
+///
+/// Created headless ([`GpuContext::headless`]: kdtrace owns the instance, device
+/// and allocator and destroys them when the last `Arc` goes) or adopted from an
+/// engine ([`GpuContext::adopt`]: kdtrace owns only its command pool; the
+/// engine's instance, device, queue and allocator are never destroyed here).
+///
+/// `GpuContext` is `Send + Sync`: its command pool and queue submissions are
+/// behind mutexes, the allocator behind the shared `Mutex`, so buffers and
+/// tracers may be created and used from several threads at once.
+pub struct GpuContext {
+    /// The Vulkan loader; `None` for an adopted context.
+    _entry: Option<ash::Entry>,
+    /// The instance (the engine's when adopted).
+    pub instance: ash::Instance,
+    /// The physical device of `device`.
+    pub physical_device: vk::PhysicalDevice,
+    /// The device (the engine's when adopted).
+    pub device: ash::Device,
+    /// The queue kdtrace submits to (uploads and `Tracer::trace`).
+    pub queue: vk::Queue,
+    /// The family of `queue`; kdtrace's command pool belongs to it.
+    pub queue_family: u32,
+    /// Properties and limits of the device.
     pub info: DeviceInfo,
+    /// True when this context created the instance, device and allocator (headless).
+    owned: bool,
     allocator: ManuallyDrop<Arc<Mutex<Allocator>>>,
-    queue_lock: Mutex<()>,
+    queue_lock: Arc<Mutex<()>>,
     command_pool: Mutex<vk::CommandPool>,
     debug: Option<Debug>,
 }
@@ -230,8 +327,7 @@ impl GpuContext {
                 debug,
             ));
         }
-        let enabled =
-            vk::PhysicalDeviceFeatures::default().shader_float64(true).shader_int64(features.shader_int64 != 0);
+        let enabled = required_features().shader_int64(features.shader_int64 != 0);
         let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(info.subgroup_size_control)
             .compute_full_subgroups(info.subgroup_size_control);
@@ -280,18 +376,130 @@ impl GpuContext {
         };
 
         Ok(GpuContext {
-            _entry: entry,
+            _entry: Some(entry),
             instance,
             physical_device,
             device,
             queue,
             queue_family,
             info,
+            owned: true,
             allocator: ManuallyDrop::new(Arc::new(Mutex::new(allocator))),
-            queue_lock: Mutex::new(()),
+            queue_lock: Arc::default(),
             command_pool: Mutex::new(pool),
             debug,
         })
+    }
+
+    /// Runs kdtrace on an engine's own instance, device, queue and allocator
+    /// (see [`AdoptDesc`]). Nothing of the engine's is created or destroyed here:
+    /// the context makes one command pool on `queue_family` and destroys it when
+    /// dropped. Validation messages are the engine's to collect (its own debug
+    /// messenger); [`GpuContext::validation_enabled`] is false.
+    ///
+    /// Errors: `Error::DeviceLimit` naming what is missing when the device is older
+    /// than Vulkan 1.2, `queue_family` has no compute support, or a feature of
+    /// [`required_features`] is unsupported or was not enabled.
+    ///
+    /// # Safety
+    /// Every handle in `desc` must be valid and belong together (the device was
+    /// created from `physical_device` of `instance` with `desc.enabled_features`;
+    /// `queue` is a queue of `queue_family` of `device`; the allocator was created
+    /// for that device), and the instance, device and allocator must outlive the
+    /// returned context and everything created from it (tracers, buffers,
+    /// kernels): drop those first, then destroy your device. The queue must be
+    /// externally synchronised as [`AdoptDesc::queue_lock`] describes.
+    pub unsafe fn adopt(desc: AdoptDesc) -> Result<Arc<GpuContext>> {
+        let AdoptDesc {
+            instance,
+            physical_device,
+            device,
+            queue_family,
+            queue,
+            queue_lock,
+            allocator,
+            enabled_features,
+            subgroup_size_control,
+        } = desc;
+        // SAFETY: the caller vouches that `physical_device` belongs to `instance`.
+        let families = unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
+        let mut info = describe(&instance, physical_device, queue_family);
+        if info.api_version < vk::API_VERSION_1_2 {
+            return Err(Error::DeviceLimit(format!(
+                "{} supports Vulkan {}.{}; kdtrace's kernels need Vulkan 1.2",
+                info.name,
+                vk::api_version_major(info.api_version),
+                vk::api_version_minor(info.api_version)
+            )));
+        }
+        match families.get(queue_family as usize) {
+            Some(f) if f.queue_flags.contains(vk::QueueFlags::COMPUTE) => {}
+            Some(f) => {
+                return Err(Error::DeviceLimit(format!(
+                    "queue family {queue_family} of {} has no compute support ({:?})",
+                    info.name, f.queue_flags
+                )))
+            }
+            None => {
+                return Err(Error::InvalidInput(format!(
+                    "queue family {queue_family} does not exist on {} ({} families)",
+                    info.name,
+                    families.len()
+                )))
+            }
+        }
+        // SAFETY: as above.
+        let supported = unsafe { instance.get_physical_device_features(physical_device) };
+        if supported.shader_float64 == vk::FALSE {
+            return Err(Error::DeviceLimit(format!(
+                "{} lacks shaderFloat64, which the watertight test's exact fallback needs",
+                info.name
+            )));
+        }
+        if enabled_features.shader_float64 == vk::FALSE {
+            return Err(Error::DeviceLimit(format!(
+                "shaderFloat64 was not enabled on the adopted device ({}); the watertight test's exact \
+                 fallback needs it: enable kdtrace::gpu::required_features() when creating the device",
+                info.name
+            )));
+        }
+        // Size control counts only when the engine enabled it as well.
+        if !subgroup_size_control {
+            info.subgroup_size_control = false;
+            info.min_subgroup_size = info.subgroup_size;
+            info.max_subgroup_size = info.subgroup_size;
+        }
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: a valid create info on the caller's live device.
+        let pool = unsafe { device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
+        Ok(Arc::new(GpuContext {
+            _entry: None,
+            instance,
+            physical_device,
+            device,
+            queue,
+            queue_family,
+            info,
+            owned: false,
+            allocator: ManuallyDrop::new(allocator),
+            queue_lock: queue_lock.unwrap_or_default(),
+            command_pool: Mutex::new(pool),
+            debug: None,
+        }))
+    }
+
+    /// True when the instance, device and allocator belong to an engine
+    /// ([`GpuContext::adopt`]); false for a headless context.
+    pub fn is_adopted(&self) -> bool {
+        !self.owned
+    }
+
+    /// The mutex kdtrace holds around each submission to [`GpuContext::queue`];
+    /// hold it around your own submissions to that queue from other threads.
+    pub fn queue_lock(&self) -> &Arc<Mutex<()>> {
+        &self.queue_lock
     }
 
     /// The allocator shared by every buffer on this device.
@@ -365,6 +573,18 @@ impl GpuContext {
 
 impl Drop for GpuContext {
     fn drop(&mut self) {
+        if !self.owned {
+            // SAFETY: every object made from this context holds an `Arc` to it, so
+            // none is alive now, and every submission from the pool was waited for.
+            // The engine's device, queue and allocator are left alone (only this
+            // context's clone of the allocator's `Arc` is released).
+            unsafe {
+                let pool = *self.command_pool.get_mut().unwrap_or_else(|p| p.into_inner());
+                self.device.destroy_command_pool(pool, None);
+                ManuallyDrop::drop(&mut self.allocator);
+            }
+            return;
+        }
         // SAFETY: every object made from this context holds an `Arc` to it, so
         // none is alive now; destroy in reverse order of creation.
         unsafe {
@@ -407,7 +627,7 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
         let result = instance.enumerate_physical_devices().vk("vkEnumeratePhysicalDevices").map(|devices| {
             devices
                 .into_iter()
-                .filter_map(|pd| compute_family(&instance, pd).map(|_| describe(&instance, pd)))
+                .filter_map(|pd| compute_family(&instance, pd).map(|q| describe(&instance, pd, q)))
                 .collect()
         });
         instance.destroy_instance(None);
@@ -421,7 +641,8 @@ fn compute_family(instance: &ash::Instance, pd: vk::PhysicalDevice) -> Option<u3
     families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).map(|i| i as u32)
 }
 
-fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice) -> DeviceInfo {
+/// The device's properties as seen from queue family `family` (its timestamps).
+fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> DeviceInfo {
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
@@ -445,7 +666,6 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice) -> DeviceInfo {
     let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut maint3);
     // SAFETY: as above.
     unsafe { instance.get_physical_device_properties2(pd, &mut p2) };
-    let family = compute_family(instance, pd).unwrap_or(0);
     // SAFETY: as above.
     let families = unsafe { instance.get_physical_device_queue_family_properties(pd) };
     let has_timestamps = families.get(family as usize).is_some_and(|f| f.timestamp_valid_bits > 0);
@@ -463,7 +683,13 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice) -> DeviceInfo {
         min_subgroup_size: if control { size_control.min_subgroup_size } else { subgroup.subgroup_size },
         max_subgroup_size: if control { size_control.max_subgroup_size } else { subgroup.subgroup_size },
         subgroup_size_control: control,
+        subgroup_operations: if subgroup.supported_stages.contains(vk::ShaderStageFlags::COMPUTE) {
+            subgroup.supported_operations
+        } else {
+            vk::SubgroupFeatureFlags::empty()
+        },
         max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+        min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment.max(1),
         max_workgroup_count_x: props.limits.max_compute_work_group_count[0],
         max_memory_allocation_size: maint3.max_memory_allocation_size,
         timestamp_period_ns: (has_timestamps && props.limits.timestamp_compute_and_graphics != 0)
@@ -477,7 +703,7 @@ fn pick_device(instance: &ash::Instance, options: &ContextOptions) -> Result<(vk
     let mut candidates: Vec<(usize, vk::PhysicalDevice, u32, DeviceInfo)> = devices
         .into_iter()
         .enumerate()
-        .filter_map(|(i, pd)| compute_family(instance, pd).map(|q| (i, pd, q, describe(instance, pd))))
+        .filter_map(|(i, pd)| compute_family(instance, pd).map(|q| (i, pd, q, describe(instance, pd, q))))
         .filter(|(_, _, _, info)| info.api_version >= vk::API_VERSION_1_2)
         .collect();
     if candidates.is_empty() {

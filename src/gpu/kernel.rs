@@ -5,16 +5,23 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::{Buffer, GpuContext};
+use super::{Buffer, BufferRange, GpuContext};
 use crate::error::{Error, Result, VkContext};
 
 /// A compute pipeline whose set 0 holds storage buffers at bindings `0..bindings`.
+/// Dropping it destroys the pipeline and its layouts (no pending work may use them).
 pub struct Kernel {
+    /// The compute pipeline (created with `DISPATCH_BASE`, see [`Kernel::record_dispatch`]).
     pub pipeline: vk::Pipeline,
+    /// Its layout: set 0 plus the push-constant range.
     pub layout: vk::PipelineLayout,
+    /// The layout of set 0: storage buffers at bindings `0..bindings`.
     pub set_layout: vk::DescriptorSetLayout,
+    /// Number of storage-buffer bindings of set 0.
     pub bindings: u32,
+    /// Bytes of push constants (0: none).
     pub push_constant_size: u32,
+    /// The kernel's `local_size_x`.
     pub workgroup_size: u32,
     ctx: Arc<GpuContext>,
 }
@@ -22,9 +29,13 @@ pub struct Kernel {
 /// How to specialize a kernel.
 #[derive(Clone, Debug, Default)]
 pub struct KernelDesc<'a> {
+    /// A name for error messages.
     pub name: &'a str,
+    /// The SPIR-V words as bytes (e.g. a constant of [`super::shaders`]).
     pub spirv: &'a [u8],
+    /// Storage-buffer bindings of set 0.
     pub bindings: u32,
+    /// Bytes of push constants.
     pub push_constant_size: u32,
     /// Specialization constants with ids 0, 1, 2, ... (32-bit each; bools as 0/1).
     pub spec_constants: &'a [u32],
@@ -32,9 +43,13 @@ pub struct KernelDesc<'a> {
     pub workgroup_size: u32,
     /// A required subgroup size (`VK_EXT_subgroup_size_control`, full subgroups).
     pub required_subgroup_size: Option<u32>,
+    /// Subgroup operations the kernel uses; a device without them in compute
+    /// shaders gets `Error::DeviceLimit` naming the missing ones.
+    pub required_subgroup_operations: vk::SubgroupFeatureFlags,
 }
 
 impl Kernel {
+    /// Creates the pipeline, checking the device supports what `desc` requires.
     pub fn new(ctx: &Arc<GpuContext>, desc: &KernelDesc) -> Result<Kernel> {
         let device = &ctx.device;
         let code = ash::util::read_spv(&mut std::io::Cursor::new(desc.spirv))
@@ -56,6 +71,14 @@ impl Kernel {
                     info.name, info.min_subgroup_size, info.max_subgroup_size, info.subgroup_size_control
                 )));
             }
+        }
+
+        let missing = desc.required_subgroup_operations & !ctx.info.subgroup_operations;
+        if !missing.is_empty() {
+            return Err(Error::DeviceLimit(format!(
+                "kernel {} needs subgroup operations {missing:?} in compute shaders, which {} lacks (it has {:?})",
+                desc.name, ctx.info.name, ctx.info.subgroup_operations
+            )));
         }
 
         // SAFETY: valid create infos on a live device; every object created here is
@@ -107,7 +130,10 @@ impl Kernel {
                 stage =
                     stage.push_next(&mut subgroup).flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS);
             }
-            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+            let info = [vk::ComputePipelineCreateInfo::default()
+                .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
+                .stage(stage)
+                .layout(layout)];
             let pipeline = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             device.destroy_shader_module(module, None);
             let pipeline = match pipeline {
@@ -130,7 +156,11 @@ impl Kernel {
         }
     }
 
-    /// Records a dispatch of `threads` invocations (rounded up to whole workgroups).
+    /// Records a dispatch of `threads` invocations (rounded up to whole workgroups):
+    /// binds the pipeline, `set` as set 0 and the push constants, then dispatches.
+    /// More workgroups than `maxComputeWorkGroupCount[0]` go in several
+    /// `vkCmdDispatchBase` calls, so `gl_GlobalInvocationID.x` still runs over
+    /// `0..threads`.
     ///
     /// # Safety
     /// `cmd` must be recording, and `set` must be a descriptor set of this kernel's
@@ -142,7 +172,18 @@ impl Kernel {
         if !push.is_empty() {
             device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
         }
-        device.cmd_dispatch(cmd, threads.div_ceil(self.workgroup_size), 1, 1);
+        let groups = threads.div_ceil(self.workgroup_size);
+        let max = self.ctx.info.max_workgroup_count_x.max(1);
+        if groups <= max {
+            device.cmd_dispatch(cmd, groups, 1, 1);
+        } else {
+            let mut base = 0;
+            while base < groups {
+                let count = (groups - base).min(max);
+                device.cmd_dispatch_base(cmd, base, 0, 0, count, 1, 1);
+                base += count;
+            }
+        }
     }
 }
 
@@ -157,8 +198,10 @@ impl Drop for Kernel {
     }
 }
 
-/// A descriptor pool holding one set of storage buffers.
+/// A descriptor pool holding one set of storage buffers. Dropping it destroys the
+/// pool and the set, so it must outlive every command buffer that uses the set.
 pub struct BufferSet {
+    /// The descriptor set (set 0 of the kernel it was made for).
     pub set: vk::DescriptorSet,
     pool: vk::DescriptorPool,
     ctx: Arc<GpuContext>,
@@ -167,12 +210,30 @@ pub struct BufferSet {
 impl BufferSet {
     /// A set for `kernel` with `buffers[i]` bound (whole) at binding `i`.
     pub fn new(ctx: &Arc<GpuContext>, kernel: &Kernel, buffers: &[&Buffer]) -> Result<BufferSet> {
-        if buffers.len() as u32 != kernel.bindings {
+        let ranges: Vec<BufferRange> = buffers.iter().map(|b| BufferRange::whole(b)).collect();
+        // SAFETY: kdtrace buffers are live storage buffers of this device, and the
+        // ranges cover exactly their sizes.
+        unsafe { Self::from_ranges(ctx, kernel, &ranges) }
+    }
+
+    /// A set for `kernel` with `ranges[i]` bound at binding `i`. Errors: a wrong
+    /// number of ranges, an empty range, an offset that is not a multiple of
+    /// `minStorageBufferOffsetAlignment`, a range beyond `maxStorageBufferRange`.
+    ///
+    /// # Safety
+    /// Each range's buffer must be a live buffer of this device created with
+    /// `STORAGE_BUFFER` usage and at least `offset + range` bytes, bound to memory,
+    /// and stay alive while the set is used by any command buffer.
+    pub unsafe fn from_ranges(ctx: &Arc<GpuContext>, kernel: &Kernel, ranges: &[BufferRange]) -> Result<BufferSet> {
+        if ranges.len() as u32 != kernel.bindings {
             return Err(Error::InvalidInput(format!(
                 "kernel has {} bindings, {} buffers given",
                 kernel.bindings,
-                buffers.len()
+                ranges.len()
             )));
+        }
+        for (binding, r) in ranges.iter().enumerate() {
+            check_range(ctx, &format!("binding {binding}"), r)?;
         }
         let device = &ctx.device;
         let sizes =
@@ -195,9 +256,9 @@ impl BufferSet {
                     return Err(e);
                 }
             };
-            let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
+            let infos: Vec<[vk::DescriptorBufferInfo; 1]> = ranges
                 .iter()
-                .map(|b| [vk::DescriptorBufferInfo { buffer: b.buffer, offset: 0, range: vk::WHOLE_SIZE }])
+                .map(|r| [vk::DescriptorBufferInfo { buffer: r.buffer, offset: r.offset, range: r.range }])
                 .collect();
             let writes: Vec<vk::WriteDescriptorSet> = infos
                 .iter()
@@ -216,6 +277,30 @@ impl BufferSet {
     }
 }
 
+/// Checks a storage-buffer range against the device's limits; `what` names it in errors.
+pub(crate) fn check_range(ctx: &GpuContext, what: &str, r: &BufferRange) -> Result<()> {
+    let info = &ctx.info;
+    if r.buffer == vk::Buffer::null() {
+        return Err(Error::InvalidInput(format!("{what}: the buffer is VK_NULL_HANDLE")));
+    }
+    if r.range == 0 || r.range == vk::WHOLE_SIZE {
+        return Err(Error::InvalidInput(format!("{what}: the range must be a byte count above 0, got {}", r.range)));
+    }
+    if r.offset % info.min_storage_buffer_offset_alignment != 0 {
+        return Err(Error::DeviceLimit(format!(
+            "{what}: offset {} is not a multiple of minStorageBufferOffsetAlignment ({}) on {}",
+            r.offset, info.min_storage_buffer_offset_alignment, info.name
+        )));
+    }
+    if r.range > info.max_storage_buffer_range {
+        return Err(Error::DeviceLimit(format!(
+            "{what}: range {} bytes exceeds maxStorageBufferRange ({}) on {}",
+            r.range, info.max_storage_buffer_range, info.name
+        )));
+    }
+    Ok(())
+}
+
 impl Drop for BufferSet {
     fn drop(&mut self) {
         // SAFETY: no pending work uses the set.
@@ -225,7 +310,9 @@ impl Drop for BufferSet {
 
 /// A pool of GPU timestamps.
 pub struct Timestamps {
+    /// The query pool.
     pub pool: vk::QueryPool,
+    /// Number of timestamps.
     pub count: u32,
     period_ns: f64,
     ctx: Arc<GpuContext>,

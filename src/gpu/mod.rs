@@ -1,13 +1,27 @@
-//! The only module that calls Vulkan: context, buffers, kernels, timestamps.
+//! The only module that calls Vulkan: the device context (headless, or adopted
+//! from an engine), buffers, kernels, timestamps. Every `unsafe` block carries a
+//! `// SAFETY:` line.
+#![warn(missing_docs)]
 mod buffer;
 mod context;
 mod kernel;
 
-pub use buffer::Buffer;
-pub use context::{list_devices, ContextOptions, DeviceInfo, GpuContext, Validation};
+pub use buffer::{Buffer, BufferRange};
+pub use context::{list_devices, required_features, AdoptDesc, ContextOptions, DeviceInfo, GpuContext, Validation};
+pub(crate) use kernel::check_range;
 pub use kernel::{BufferSet, Kernel, KernelDesc, Timestamps};
 
-/// SPIR-V of the kernels in `glsl/`, compiled by build.rs.
+/// SPIR-V of the kernels in `glsl/`, compiled by build.rs, and the GLSL header
+/// for shader authors.
+///
+/// - `TRACE`, `LAYOUT_PROBE`: the library's kernels (`glsl/*.comp`).
+/// - [`HEADER`](shaders::HEADER): `kdtrace.glsl`, a self-contained GLSL header with
+///   the std430 `Ray` and `Hit` structs (`glsl/shared/ray.glsl`) and the special
+///   `prim_id`s and counter indices of [`crate::consts`] as `#define`s. Write it
+///   into your shader include path and `#include "kdtrace.glsl"`.
+/// - `EXAMPLE_*`: the shaders of `examples/embed.rs` (`glsl/examples/*.comp`),
+///   compiled against `HEADER` alone as a user's shader would be. For the example
+///   and its test only; not part of the tracing API.
 pub mod shaders {
     include!(concat!(env!("OUT_DIR"), "/shaders.rs"));
 }

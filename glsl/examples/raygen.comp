@@ -1,0 +1,38 @@
+#version 450
+// examples/embed.rs, pass 1: the engine's own ray generation. One pinhole-camera
+// ray per pixel, written as kdtrace `Ray`s into a range of the engine's buffer.
+// Compiled against kdtrace.glsl alone (shaders::HEADER), as a user's shader is.
+
+#extension GL_GOOGLE_include_directive : require
+
+#include "kdtrace.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(std430, set = 0, binding = 0) writeonly buffer Rays { Ray rays[]; };
+
+// The camera basis, scaled so that pixel (x, y) looks along
+// forward + sx * right + sy * up with sx, sy in [-1, 1] (src: examples/embed.rs).
+layout(push_constant) uniform CameraParams {
+    vec4 eye;
+    vec4 forward;
+    vec4 right;   // right * tan(fov / 2) * aspect
+    vec4 up;      // up * tan(fov / 2)
+    uint width;
+    uint height;
+} cam;
+
+void main() {
+    uint index = gl_GlobalInvocationID.x;
+    if (index >= cam.width * cam.height) return;
+    uint x = index % cam.width;
+    uint y = index / cam.width;
+    float sx = 2.0 * (float(x) + 0.5) / float(cam.width) - 1.0;
+    float sy = 1.0 - 2.0 * (float(y) + 0.5) / float(cam.height);
+    Ray ray;
+    ray.origin = cam.eye.xyz;
+    ray.tmin = 0.0;
+    ray.dir = normalize(cam.forward.xyz + sx * cam.right.xyz + sy * cam.up.xyz);
+    ray.tmax = uintBitsToFloat(0x7f800000u);  // +inf
+    rays[index] = ray;
+}

@@ -1,0 +1,50 @@
+#version 450
+// examples/embed.rs, pass 3: the engine's own shading of kdtrace's hits. A light
+// at the eye on each triangle's diffuse colour (as `kdtrace render` shades),
+// written as sRGB RGBA8 pixels. Compiled against kdtrace.glsl alone.
+
+#extension GL_GOOGLE_include_directive : require
+
+#include "kdtrace.glsl"
+
+layout(local_size_x = 64) in;
+
+// The engine's per-triangle surface data, indexed by prim_id.
+struct Surface {
+    vec4 normal;    // xyz: unit geometric normal
+    vec4 albedo;    // rgb
+    vec4 emission;  // rgb, clamped to 1
+};
+
+layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Hits { Hit hits[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Surfaces { Surface surfaces[]; };
+layout(std430, set = 0, binding = 3) writeonly buffer Pixels { uint pixels[]; };
+
+layout(push_constant) uniform ShadeParams {
+    uint count;
+} params;
+
+float srgb(float c) {
+    c = clamp(c, 0.0, 1.0);
+    return c <= 0.0031308 ? 12.92 * c : 1.055 * pow(c, 1.0 / 2.4) - 0.055;
+}
+
+void main() {
+    uint index = gl_GlobalInvocationID.x;
+    if (index >= params.count) return;
+    Hit hit = hits[index];
+    vec3 color;
+    if (hit.prim_id == PRIM_INCOMPLETE) {
+        color = vec3(1.0, 0.0, 1.0);  // traversal cut short: never passes as a miss
+    } else if (hit.prim_id == PRIM_MISS || hit.prim_id == PRIM_INVALID) {
+        color = vec3(0.05);
+    } else {
+        Surface s = surfaces[hit.prim_id];
+        vec3 dir = normalize(rays[index].dir);
+        float cos_theta = abs(dot(s.normal.xyz, dir));
+        color = s.albedo.rgb * (0.1 + 0.9 * cos_theta) + s.emission.rgb;
+    }
+    uvec3 rgb = uvec3(vec3(srgb(color.r), srgb(color.g), srgb(color.b)) * 255.0 + 0.5);
+    pixels[index] = rgb.r | (rgb.g << 8) | (rgb.b << 16) | (255u << 24);
+}

@@ -1,0 +1,394 @@
+//! The embedding API: kdtrace on an engine's own device, queue and allocator
+//! (examples/embed.rs, whose code this test includes), traces recorded into
+//! command buffers kdtrace does not submit, buffer ranges, the scene lifecycle,
+//! and nothing left behind when the engine destroys its device.
+
+mod common;
+
+#[allow(dead_code)]
+#[path = "../examples/embed.rs"]
+mod embed;
+
+use std::path::PathBuf;
+
+use ash::vk;
+use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
+use embed::Engine;
+use gpu_allocator::MemoryLocation;
+use kdtrace::consts::{
+    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
+};
+use kdtrace::gpu::{Buffer, BufferRange, GpuContext, Validation};
+use kdtrace::kdtree::traverse::{Counters, Variant};
+use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::render::{camera_rays, shade_headlight, to_image};
+use kdtrace::scene::{Camera, Scene};
+use kdtrace::trace::{TraceOptions, Tracer};
+use kdtrace::{Error, Hit, Ray};
+
+/// The layer as `common::context` chooses it: required under CI, else if installed.
+fn validation() -> Validation {
+    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
+    if ci {
+        Validation::Required
+    } else {
+        Validation::IfAvailable
+    }
+}
+
+fn out_dir() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("embed");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn load(name: &str) -> (Scene, KdTree) {
+    let scene = Scene::load(&scene_path(name)).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    (scene, tree)
+}
+
+fn same_bits(a: &[Hit], b: &[Hit]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|(a, b)| {
+            (a.t.to_bits(), a.prim_id, a.u.to_bits(), a.v.to_bits())
+                == (b.t.to_bits(), b.prim_id, b.u.to_bits(), b.v.to_bits())
+        })
+}
+
+#[test]
+fn example_renders_like_kdtrace_render() {
+    let (width, height) = (96, 72);
+    let path = embed::default_scene();
+    let output = out_dir().join("embed.png");
+    let report = embed::run(&path, width, height, Some(&output), validation()).expect("the embed example");
+    let written = image::open(&output).expect("the example's PNG").to_rgb8();
+    assert_eq!(written, report.image, "the PNG holds the rendered frame");
+
+    // `kdtrace render` of the same scene and camera: Tracer::trace on a headless device.
+    let scene = Scene::load(&path).unwrap();
+    assert_eq!(report.camera, embed::scene_camera(&path, &scene).unwrap());
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let ctx = context();
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let rays = camera_rays(&report.camera, width, height);
+    let hits = tracer.trace(&rays, &TraceOptions::default()).unwrap().hits;
+    let expected = to_image(&shade_headlight(&scene, &rays, &hits), width, height);
+
+    // The engine's rays are made in f32 on the GPU, kdtrace's in f64 on the CPU:
+    // pixels may differ where a ray grazes an edge, nowhere else.
+    let diff = image::RgbImage::from_fn(width, height, |x, y| {
+        let (a, b) = (written.get_pixel(x, y).0, expected.get_pixel(x, y).0);
+        image::Rgb([0, 1, 2].map(|c| a[c].abs_diff(b[c])))
+    });
+    let different = diff.pixels().filter(|p| p.0.iter().any(|&d| d > 8)).count();
+    let mean = diff.pixels().flat_map(|p| p.0).map(f64::from).sum::<f64>() / (3 * width * height) as f64;
+    if different * 100 > (width * height) as usize || mean > 1.0 {
+        expected.save(out_dir().join("embed-expected.png")).unwrap();
+        diff.save(out_dir().join("embed-difference.png")).unwrap();
+        panic!("{different} pixels differ by more than 8, mean difference {mean:.3}; see {}", out_dir().display());
+    }
+    let expected_hits = hits.iter().filter(|h| h.is_hit()).count();
+    assert!(report.hits * 2 > (width * height) as usize, "only {} pixels hit", report.hits);
+    assert!(report.hits.abs_diff(expected_hits) * 100 <= expected_hits, "{} vs {expected_hits} hits", report.hits);
+    let mut colours: Vec<[u8; 3]> = written.pixels().map(|p| p.0).collect();
+    colours.sort();
+    colours.dedup();
+    assert!(colours.len() > 20, "a Cornell box has shaded walls, boxes and a light: {} colours", colours.len());
+    drop(tracer);
+    assert_validation_clean(&ctx);
+}
+
+#[test]
+fn tracers_on_an_adopted_device_leave_nothing_behind() {
+    let engine = Engine::new(validation(), true).unwrap();
+    let ctx = engine.kdtrace_context().unwrap();
+    assert!(ctx.is_adopted() && !ctx.validation_enabled());
+    let (cornell, cornell_tree) = load("cornell_box.obj");
+    let (teapot, teapot_tree) = load("teapot.obj");
+    let mut rng = Rng(7);
+    let cornell_rays = random_rays(&mut rng, cornell.bounds.min, cornell.bounds.max, 300);
+    let teapot_rays = random_rays(&mut rng, teapot.bounds.min, teapot.bounds.max, 300);
+    let options = TraceOptions::variant(Variant::PushDownShortStack);
+    let cornell_hits = Tracer::new(&ctx, &cornell_tree, &cornell.triangles).unwrap().trace(&cornell_rays, &options);
+    let teapot_hits = Tracer::new(&ctx, &teapot_tree, &teapot.triangles).unwrap().trace(&teapot_rays, &options);
+    let (cornell_hits, teapot_hits) = (cornell_hits.unwrap().hits, teapot_hits.unwrap().hits);
+
+    // Several tracers on the one device, made, used, replaced and dropped on two threads.
+    std::thread::scope(|s| {
+        for thread in 0..2 {
+            let ctx = &ctx;
+            let (cornell, cornell_tree, teapot, teapot_tree) = (&cornell, &cornell_tree, &teapot, &teapot_tree);
+            let (cornell_rays, teapot_rays, cornell_hits, teapot_hits) =
+                (&cornell_rays, &teapot_rays, &cornell_hits, &teapot_hits);
+            s.spawn(move || {
+                for round in 0..2 {
+                    let mut a = Tracer::new(ctx, cornell_tree, &cornell.triangles).unwrap();
+                    let mut b = Tracer::new(ctx, teapot_tree, &teapot.triangles).unwrap();
+                    let got = a.trace(cornell_rays, &options).unwrap().hits;
+                    assert!(same_bits(&got, cornell_hits), "thread {thread} round {round}: cornell");
+                    let got = b.trace(teapot_rays, &options).unwrap().hits;
+                    assert!(same_bits(&got, teapot_hits), "thread {thread} round {round}: teapot");
+                    a.replace_scene(teapot_tree, &teapot.triangles).unwrap();
+                    let got = a.trace(teapot_rays, &options).unwrap().hits;
+                    assert!(same_bits(&got, teapot_hits), "thread {thread} round {round}: replaced");
+                }
+            });
+        }
+    });
+
+    // Every kdtrace allocation came from the engine's allocator and went back to it.
+    let report = engine.allocator().lock().unwrap().generate_report();
+    let names: Vec<&str> = report.allocations.iter().map(|a| a.name.as_str()).collect();
+    assert!(names.is_empty(), "allocations left in the engine's allocator: {names:?}");
+    drop(ctx);
+    let messages = engine.shutdown().unwrap();
+    assert!(messages.is_empty(), "validation messages up to device destruction:\n{}", messages.join("\n"));
+}
+
+#[test]
+fn device_destruction_reports_what_is_left() {
+    // The check above is only worth something if a leak does get reported.
+    let engine = Engine::new(validation(), true).unwrap();
+    if !engine.validation_enabled() {
+        eprintln!("VK_LAYER_KHRONOS_validation is not installed: nothing to check");
+        return;
+    }
+    let info = vk::BufferCreateInfo::default().size(64).usage(vk::BufferUsageFlags::STORAGE_BUFFER);
+    // SAFETY: a valid create info; the buffer is left alive on purpose.
+    let _leaked = unsafe { engine.device.create_buffer(&info, None) }.unwrap();
+    let messages = engine.shutdown().unwrap();
+    assert!(messages.iter().any(|m| m.contains("VkBuffer")), "no leak reported: {messages:?}");
+}
+
+#[test]
+fn adopting_checks_features_and_queue() {
+    let engine = Engine::new(validation(), false).unwrap();
+    match engine.kdtrace_context() {
+        Err(Error::DeviceLimit(m)) => assert!(m.contains("shaderFloat64"), "{m}"),
+        Err(e) => panic!("unexpected error: {e}"),
+        Ok(_) => panic!("a device without shaderFloat64 must be refused"),
+    }
+    let messages = engine.shutdown().unwrap();
+    assert!(messages.is_empty(), "{messages:?}");
+
+    let engine = Engine::new(validation(), true).unwrap();
+    match engine.kdtrace_context_on(999) {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("queue family 999"), "{m}"),
+        Err(e) => panic!("unexpected error: {e}"),
+        Ok(_) => panic!("queue family 999 does not exist"),
+    }
+    let messages = engine.shutdown().unwrap();
+    assert!(messages.is_empty(), "{messages:?}");
+}
+
+/// Host-visible buffers with rays, hits and counters at aligned offsets of shared buffers.
+struct Ranges {
+    _input: Buffer,
+    output: Buffer,
+    rays: BufferRange,
+    hits: BufferRange,
+    counters: BufferRange,
+}
+
+impl Ranges {
+    fn new(ctx: &std::sync::Arc<GpuContext>, rays: &[Ray]) -> Ranges {
+        let align = ctx.info.min_storage_buffer_offset_alignment;
+        let up = |v: u64| v.div_ceil(align) * align;
+        let n = rays.len() as u64;
+        let (ray_bytes, hit_bytes, counter_bytes) = (32 * n, 16 * n, 4 * u64::from(COUNTERS_PER_RAY) * n);
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        // The rays after some bytes of the engine's own, the counters after the hits.
+        let ray_offset = up(100);
+        let mut input = Buffer::new(ctx, ray_offset + ray_bytes, usage, MemoryLocation::CpuToGpu, "rays").unwrap();
+        input.write(ray_offset as usize, bytemuck::cast_slice(rays)).unwrap();
+        let counter_offset = up(hit_bytes);
+        let output =
+            Buffer::new(ctx, counter_offset + counter_bytes, usage, MemoryLocation::GpuToCpu, "hits+counters").unwrap();
+        Ranges {
+            rays: BufferRange::new(input.buffer, ray_offset, ray_bytes),
+            hits: BufferRange::new(output.buffer, 0, hit_bytes),
+            counters: BufferRange::new(output.buffer, counter_offset, counter_bytes),
+            _input: input,
+            output,
+        }
+    }
+
+    fn hits(&self, count: usize) -> Vec<Hit> {
+        bytemuck::cast_slice(self.output.read(0, 16 * count).unwrap()).to_vec()
+    }
+
+    fn counters(&self, count: usize) -> Vec<Counters> {
+        let per_ray = COUNTERS_PER_RAY as usize;
+        let raw: &[u32] =
+            bytemuck::cast_slice(self.output.read(self.counters.offset as usize, 4 * per_ray * count).unwrap());
+        raw.chunks_exact(per_ray)
+            .map(|c| Counters {
+                nodes: c[COUNTER_NODES as usize],
+                leaves: c[COUNTER_LEAVES as usize],
+                triangles: c[COUNTER_TRIANGLES as usize],
+                restarts: c[COUNTER_RESTARTS as usize],
+                steps: c[COUNTER_STEPS as usize],
+                drops: c[COUNTER_DROPS as usize],
+            })
+            .collect()
+    }
+}
+
+/// Submits `record` with a barrier that makes shader writes visible to the host.
+fn submit<T>(ctx: &GpuContext, record: impl FnOnce(vk::CommandBuffer) -> T) -> T {
+    let mut out = None;
+    ctx.submit_and_wait(|cmd| {
+        out = Some(record(cmd));
+        let barrier = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ);
+        // SAFETY: `cmd` is recording.
+        unsafe {
+            ctx.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            )
+        };
+    })
+    .unwrap();
+    out.unwrap()
+}
+
+#[test]
+fn recorded_traces_equal_trace() {
+    let ctx = context();
+    let (scene, tree) = load("cornell_box.obj");
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let mut rays = camera_rays(&camera, 24, 16);
+    rays.extend(random_rays(&mut Rng(3), scene.bounds.min, scene.bounds.max, 200));
+    let n = rays.len();
+    let ranges = Ranges::new(&ctx, &rays);
+
+    // record_trace: counters off, into ranges at offsets.
+    let options = TraceOptions::variant(Variant::ShortStack);
+    let expected = tracer.trace(&rays, &options).unwrap();
+    let binding = submit(&ctx, |cmd| {
+        // SAFETY: the ranges are live storage buffers; the binding lives past the wait.
+        unsafe { tracer.record_trace(cmd, ranges.rays, ranges.hits, n as u32, &options) }.unwrap()
+    });
+    assert!(same_bits(&ranges.hits(n), &expected.hits));
+    assert_eq!(binding.capacity() as usize, n);
+    drop(binding);
+
+    // A binding with counters, made once and recorded twice.
+    let options = TraceOptions { counters: true, ..TraceOptions::variant(Variant::PushDown) };
+    let expected = tracer.trace(&rays, &options).unwrap();
+    // SAFETY: as above.
+    let binding = unsafe { tracer.bind(ranges.rays, ranges.hits, Some(ranges.counters), &options) }.unwrap();
+    for count in [n / 3, n] {
+        // SAFETY: the binding and its buffers outlive the waited submission.
+        submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &binding, count as u32) }).unwrap();
+        assert!(same_bits(&ranges.hits(count), &expected.hits[..count]), "{count} rays");
+        assert_eq!(ranges.counters(count), expected.counters.as_ref().unwrap()[..count], "{count} rays");
+    }
+
+    // Side-buffer variants: recording never uploads, so prepare comes first.
+    let options = TraceOptions::variant(Variant::Backtrack);
+    // SAFETY: nothing is recorded when it fails.
+    let refused = submit(&ctx, |cmd| unsafe { tracer.record_trace(cmd, ranges.rays, ranges.hits, n as u32, &options) });
+    match refused {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("prepare"), "{m}"),
+        other => panic!("expected a request to prepare, got {other:?}"),
+    }
+    tracer.prepare(&options).unwrap();
+    let expected = tracer.trace(&rays, &options).unwrap();
+    let binding = submit(&ctx, |cmd| {
+        // SAFETY: as above.
+        unsafe { tracer.record_trace(cmd, ranges.rays, ranges.hits, n as u32, &options) }.unwrap()
+    });
+    assert!(same_bits(&ranges.hits(n), &expected.hits));
+    drop(binding);
+    drop((tracer, ranges));
+    assert_validation_clean(&ctx);
+}
+
+/// Asserts `result` is `Error::InvalidInput` with `needle` in its message.
+fn invalid<T>(result: kdtrace::Result<T>, needle: &str) {
+    match result {
+        Err(Error::InvalidInput(m)) => assert!(m.contains(needle), "{m} lacks {needle}"),
+        Err(e) => panic!("unexpected error: {e}"),
+        Ok(_) => panic!("expected an error about {needle}"),
+    }
+}
+
+#[test]
+fn bad_ranges_and_stale_bindings_are_refused() {
+    let ctx = context();
+    let (scene, tree) = load("cornell_box.obj");
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let rays = random_rays(&mut Rng(5), scene.bounds.min, scene.bounds.max, 64);
+    let r = Ranges::new(&ctx, &rays);
+    let options = TraceOptions::default();
+    let n = rays.len() as u32;
+    // SAFETY (every call below): the ranges' buffers are live storage buffers of
+    // this device, and nothing that fails is recorded or kept.
+    let bind = |tracer: &mut Tracer, rays, hits, counters, options: &TraceOptions| unsafe {
+        tracer.bind(rays, hits, counters, options)
+    };
+
+    let align = ctx.info.min_storage_buffer_offset_alignment;
+    if align > 1 {
+        let misaligned = BufferRange { offset: r.rays.offset + align / 2, range: r.rays.range - align, ..r.rays };
+        match bind(&mut tracer, misaligned, r.hits, None, &options) {
+            Err(Error::DeviceLimit(m)) => assert!(m.contains("minStorageBufferOffsetAlignment"), "{m}"),
+            Err(e) => panic!("unexpected error: {e}"),
+            Ok(_) => panic!("a misaligned offset must be refused"),
+        }
+    }
+    let too_long = BufferRange { range: ctx.info.max_storage_buffer_range + 16, ..r.rays };
+    assert!(matches!(bind(&mut tracer, too_long, r.hits, None, &options), Err(Error::DeviceLimit(_))));
+    invalid(bind(&mut tracer, r.rays, BufferRange { range: 8, ..r.hits }, None, &options), "no whole record");
+    invalid(bind(&mut tracer, r.rays, BufferRange { range: 0, ..r.hits }, None, &options), "above 0");
+    let overlapping = BufferRange { offset: r.hits.offset, ..r.counters };
+    invalid(
+        bind(&mut tracer, r.rays, r.hits, Some(overlapping), &TraceOptions { counters: true, ..options }),
+        "overlaps",
+    );
+    invalid(bind(&mut tracer, r.rays, r.hits, None, &TraceOptions { counters: true, ..options }), "no counter range");
+    invalid(bind(&mut tracer, r.rays, r.hits, Some(r.counters), &options), "counters is off");
+    // SAFETY: the command buffer is recording; the error records nothing.
+    let counters_refused = submit(&ctx, |cmd| unsafe {
+        tracer.record_trace(cmd, r.rays, r.hits, n, &TraceOptions { counters: true, ..options })
+    });
+    invalid(counters_refused, "no counters");
+
+    let binding = bind(&mut tracer, r.rays, r.hits, None, &options).unwrap();
+    // SAFETY: as above.
+    invalid(submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &binding, n + 1) }), "exceed");
+    let mut other = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    // SAFETY: as above.
+    invalid(submit(&ctx, |cmd| unsafe { other.record_binding(cmd, &binding, n) }), "another tracer");
+    submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &binding, n) }).unwrap();
+    let before = r.hits(n as usize);
+    // The same tracer with another scene: old bindings are refused, new ones trace it.
+    let (teapot, teapot_tree) = load("teapot.obj");
+    tracer.replace_scene(&teapot_tree, &teapot.triangles).unwrap();
+    // SAFETY: as above.
+    invalid(submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &binding, n) }), "replace_scene");
+    let rebound = bind(&mut tracer, r.rays, r.hits, None, &options).unwrap();
+    // SAFETY: as above.
+    submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &rebound, n) }).unwrap();
+    let fresh = other.trace(&rays, &options).unwrap().hits;
+    assert!(same_bits(&before, &fresh), "the first scene, traced by another tracer");
+    other.replace_scene(&teapot_tree, &teapot.triangles).unwrap();
+    assert!(same_bits(&r.hits(n as usize), &other.trace(&rays, &options).unwrap().hits), "the replaced scene");
+    // A prebuilt tree that does not fit its triangles is refused, and the scene stays.
+    let mut broken = teapot_tree.clone();
+    broken.prim_indices.iter_mut().for_each(|p| *p += 1_000_000);
+    invalid(tracer.replace_scene(&broken, &teapot.triangles).map(|_| ()), "does not fit");
+    invalid(Tracer::new(&ctx, &broken, &teapot.triangles).map(|_| ()), "does not fit");
+    drop((binding, rebound, tracer, other, r));
+    assert_validation_clean(&ctx);
+}
