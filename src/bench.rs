@@ -12,26 +12,36 @@ use crate::Result;
 /// One measured traversal on one batch of rays.
 #[derive(Clone, Debug)]
 pub struct BenchRow {
+    /// The traversal measured.
     pub traversal: Traversal,
+    /// Rays in the batch.
     pub rays: usize,
     /// Median GPU seconds over the timed repetitions (after one warm-up).
     pub seconds_median: f64,
+    /// Fastest timed repetition, GPU seconds.
     pub seconds_min: f64,
+    /// Slowest timed repetition, GPU seconds.
     pub seconds_max: f64,
-    /// Means per ray.
+    /// Mean node fetches per ray ([`Counters::nodes`]).
     pub nodes: f64,
+    /// Mean leaves visited per ray ([`Counters::leaves`]).
     pub leaves: f64,
+    /// Mean ray/triangle tests per ray ([`Counters::triangles`]).
     pub triangles: f64,
+    /// Mean restarts, backtracks or rope hops per ray ([`Counters::restarts`]).
     pub restarts: f64,
+    /// Mean short-stack drops per ray ([`Counters::drops`]).
     pub drops: f64,
     /// Rays whose hit differs from the first traversal's (prim_id, or t beyond 1e-6 relative).
     pub differ_from_baseline: usize,
     /// Rays of the reference sample that disagree with the float64 reference, and the sample size.
     pub reference_errors: usize,
+    /// Rays checked against the float64 reference (0 for any-hit traversals).
     pub reference_sample: usize,
 }
 
 impl BenchRow {
+    /// Rays per second at the median GPU time.
     pub fn rays_per_second(&self) -> f64 {
         self.rays as f64 / self.seconds_median
     }

@@ -21,36 +21,59 @@ pub const PRIM_INVALID: u32 = 0xFFFF_FFFE;
 /// `Hit::prim_id` of a ray whose traversal did not finish (step cap or driver loop cut-off).
 pub const PRIM_INCOMPLETE: u32 = 0xFFFF_FFFD;
 
-/// Traversal variant ids (specialization constant 0 of the trace kernel).
+// Traversal variant ids (specialization constant 0 of the trace kernel).
+/// Variant id of `stack`: full per-ray stack (pbrt-v3), the baseline.
 pub const VARIANT_STACK: u32 = 0;
+/// Variant id of `restart`: kd-restart from the root (Foley & Sugerman 2005).
 pub const VARIANT_RESTART: u32 = 1;
+/// Variant id of `push-down`: kd-restart from the push-down node (Horn et al. 2007).
 pub const VARIANT_PUSH_DOWN: u32 = 2;
+/// Variant id of `short-stack`: ring-buffer short stack with restart (Horn et al. 2007).
 pub const VARIANT_SHORT_STACK: u32 = 3;
+/// Variant id of `push-down-short-stack`: short stack plus push-down (Horn et al. 2007).
 pub const VARIANT_PUSH_DOWN_SHORT_STACK: u32 = 4;
+/// Variant id of `backtrack`: kd-backtrack over parent links (Foley & Sugerman 2005).
 pub const VARIANT_BACKTRACK: u32 = 5;
+/// Variant id of `ropes`: leaf-to-leaf rope walk (Popov et al. 2007).
 pub const VARIANT_ROPES: u32 = 6;
 
-/// Descriptor bindings of the trace kernel (set 0).
+// Descriptor bindings of the trace kernel (set 0).
+/// Binding of the kd-tree nodes (8-byte `KdNode`s, read-only).
 pub const BINDING_NODES: u32 = 0;
+/// Binding of the leaves' triangle index lists (`u32` each, read-only).
 pub const BINDING_PRIM_INDICES: u32 = 1;
+/// Binding of the triangle vertices (9 `f32` per triangle, read-only).
 pub const BINDING_TRIANGLES: u32 = 2;
+/// Binding of the input rays (32-byte std430 `Ray`s, read-only).
 pub const BINDING_RAYS: u32 = 3;
+/// Binding of the output hits (16-byte std430 `Hit`s, write-only).
 pub const BINDING_HITS: u32 = 4;
+/// Binding of the per-ray counters (`COUNTERS_PER_RAY` `u32` per ray, write-only).
 pub const BINDING_COUNTERS: u32 = 5;
-/// Side buffers, bound only by the variants that need them (a dummy otherwise).
+// Side buffers, bound only by the variants that need them (a dummy otherwise).
+/// Binding of the parent links (`u32` per node; `backtrack` only).
 pub const BINDING_PARENTS: u32 = 6;
+/// Binding of the node boxes (6 `f32` per node: min xyz, max xyz; `backtrack` and `ropes`).
 pub const BINDING_NODE_BOXES: u32 = 7;
+/// Binding of the leaf ropes (6 `u32` per node, `NO_ROPE` on the boundary; `ropes` only).
 pub const BINDING_ROPES: u32 = 8;
 /// Number of bindings of the trace kernel.
 pub const TRACE_BINDINGS: u32 = 9;
 
-/// Per-ray counters written when counters are on (u32 each).
+// Per-ray counters written when counters are on (u32 each), indices within a ray's record.
+/// Counter index of node fetches (interior and leaf, backtrack climbs included).
 pub const COUNTER_NODES: u32 = 0;
+/// Counter index of leaves visited.
 pub const COUNTER_LEAVES: u32 = 1;
+/// Counter index of ray/triangle tests.
 pub const COUNTER_TRIANGLES: u32 = 2;
+/// Counter index of restarts (kd-restart, push-down, empty short stack), backtracks or rope hops.
 pub const COUNTER_RESTARTS: u32 = 3;
+/// Counter index of traversal loop iterations.
 pub const COUNTER_STEPS: u32 = 4;
+/// Counter index of short-stack entries dropped because the stack was full.
 pub const COUNTER_DROPS: u32 = 5;
+/// `u32` slots per ray in the counter buffer (6 used, padded to 8).
 pub const COUNTERS_PER_RAY: u32 = 8;
 
 /// Every constant above, as `#define`s for the shaders.

@@ -7,19 +7,33 @@ use std::path::PathBuf;
 pub enum Error {
     /// A scene file could not be read or is malformed; `line` is 1-based when known.
     #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
-    Scene { path: PathBuf, line: Option<usize>, message: String },
+    Scene {
+        /// The file that failed.
+        path: PathBuf,
+        /// 1-based line number, when the error has one.
+        line: Option<usize>,
+        /// What was wrong.
+        message: String,
+    },
 
     /// A file could not be read or written.
     #[error("{}: {source}", path.display())]
     Io {
+        /// The file that failed.
         path: PathBuf,
+        /// The underlying I/O error.
         #[source]
         source: std::io::Error,
     },
 
     /// A Vulkan call failed.
     #[error("Vulkan: {what} failed: {result}")]
-    Vulkan { what: &'static str, result: ash::vk::Result },
+    Vulkan {
+        /// The failed call, e.g. `vkCreateInstance`.
+        what: &'static str,
+        /// The `VkResult` it returned.
+        result: ash::vk::Result,
+    },
 
     /// The Vulkan loader could not be loaded.
     #[error("Vulkan loader: {0}")]
@@ -48,7 +62,14 @@ pub enum Error {
     /// Some rays did not finish traversal (step cap or a driver loop cut-off);
     /// their hits would be wrong, so they are reported instead of returned.
     #[error("{count} ray(s) did not finish traversal (first: ray {first}); the step cap is {cap}")]
-    Incomplete { count: usize, first: usize, cap: u32 },
+    Incomplete {
+        /// Number of rays that did not finish.
+        count: usize,
+        /// Index of the first such ray in the batch.
+        first: usize,
+        /// The traversal step cap ([`crate::consts::MAX_TRAVERSAL_STEPS`]).
+        cap: u32,
+    },
 }
 
 /// The library's result type.

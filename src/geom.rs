@@ -7,7 +7,9 @@ use glam::Vec3;
 /// An axis-aligned box. The empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
+    /// Lower corner (inclusive).
     pub min: Vec3,
+    /// Upper corner (inclusive).
     pub max: Vec3,
 }
 
@@ -15,34 +17,42 @@ impl Aabb {
     /// The empty box: the identity of `union`.
     pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
 
+    /// The box `[min, max]`, taken as given (no reordering of the corners).
     pub fn new(min: Vec3, max: Vec3) -> Self {
         Aabb { min, max }
     }
 
+    /// The smallest box holding every point; [`Aabb::EMPTY`] for no points.
     pub fn from_points(points: &[Vec3]) -> Self {
         points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
     }
 
+    /// The box enlarged to hold the point `p`.
     pub fn grow(self, p: Vec3) -> Self {
         Aabb { min: self.min.min(p), max: self.max.max(p) }
     }
 
+    /// The smallest box holding both boxes.
     pub fn union(self, o: Aabb) -> Self {
         Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
     }
 
+    /// The common part of both boxes; empty (`min > max` on some axis) when they are disjoint.
     pub fn intersection(self, o: Aabb) -> Self {
         Aabb { min: self.min.max(o.min), max: self.max.min(o.max) }
     }
 
+    /// True when `min > max` on some axis; a flat box (`min == max`) is not empty.
     pub fn is_empty(&self) -> bool {
         self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
     }
 
+    /// Edge lengths `max - min`, clamped at 0 per axis (zero for an empty box).
     pub fn extent(&self) -> Vec3 {
         (self.max - self.min).max(Vec3::ZERO)
     }
 
+    /// Midpoint `(min + max) / 2` (meaningless for an empty box).
     pub fn center(&self) -> Vec3 {
         0.5 * (self.min + self.max)
     }
@@ -61,6 +71,7 @@ impl Aabb {
         !self.intersection(*o).is_empty()
     }
 
+    /// True when the closed box `o` lies inside this closed box (shared faces count).
     pub fn contains_box(&self, o: &Aabb) -> bool {
         self.min.cmple(o.min).all() && o.max.cmple(self.max).all()
     }
@@ -72,13 +83,18 @@ impl Aabb {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Ray {
+    /// Origin, world units.
     pub origin: [f32; 3],
+    /// Start of the segment, in units of `dir` (usually 0).
     pub tmin: f32,
+    /// Direction; need not be normalized, must not be zero.
     pub dir: [f32; 3],
+    /// End of the segment, in units of `dir`; may be `+inf`.
     pub tmax: f32,
 }
 
 impl Ray {
+    /// The segment `origin + t * dir`, `tmin <= t <= tmax`.
     pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
         Ray { origin: origin.into(), tmin, dir: dir.into(), tmax }
     }
@@ -99,15 +115,22 @@ impl Ray {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Hit {
+    /// Ray parameter of the hit, in units of `dir`; `+inf` for a miss, NaN for an
+    /// invalid or incomplete ray.
     pub t: f32,
+    /// Triangle index (scene order), or `PRIM_MISS`, `PRIM_INVALID`, `PRIM_INCOMPLETE`.
     pub prim_id: u32,
+    /// Barycentric weight of `v1`; 0 without a hit.
     pub u: f32,
+    /// Barycentric weight of `v2`; 0 without a hit.
     pub v: f32,
 }
 
 impl Hit {
+    /// The miss: `t = +inf`, `prim_id = PRIM_MISS`, `u = v = 0`.
     pub const MISS: Hit = Hit { t: f32::INFINITY, prim_id: crate::consts::PRIM_MISS, u: 0.0, v: 0.0 };
 
+    /// True when `prim_id` is a triangle index, i.e. not one of the special `PRIM_*` values.
     pub fn is_hit(&self) -> bool {
         self.prim_id < crate::consts::PRIM_INCOMPLETE
     }
@@ -124,16 +147,24 @@ impl Default for Hit {
 /// Mirrored by `WatertightRay` in `glsl/shared/triangle.glsl`.
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
+    /// Axis (0..=2) that becomes x: the next after `kz`, swapped with `ky` when `dir[kz] < 0`.
     pub kx: usize,
+    /// Axis (0..=2) that becomes y.
     pub ky: usize,
+    /// Dominant axis (0..=2) of the direction: largest `|dir|` component, ties to the lower axis.
     pub kz: usize,
+    /// Shear `dir[kx] / dir[kz]`.
     pub sx: f32,
+    /// Shear `dir[ky] / dir[kz]`.
     pub sy: f32,
+    /// Scale `1 / dir[kz]`.
     pub sz: f32,
+    /// Ray origin; the vertices are translated by `-origin` before the shear.
     pub origin: Vec3,
 }
 
 impl WatertightRay {
+    /// The per-ray constants for `origin + t * dir` (`dir` non-zero, finite).
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
         let a = dir.abs();
         // Largest component; ties go to the lower axis, exactly as in the shader.

@@ -126,7 +126,10 @@
 //!
 //! [ash]: https://crates.io/crates/ash
 //! [gpu-allocator]: https://crates.io/crates/gpu-allocator
+#![warn(missing_docs)]
+
 pub mod bench;
+/// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).
 pub mod consts;
 pub mod error;
 pub mod geom;

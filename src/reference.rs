@@ -27,9 +27,13 @@ use crate::kdtree::build::is_skipped;
 /// barycentrics of [`Hit`]: point = `(1-u-v)·v0 + u·v1 + v·v2`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RefHit {
+    /// Triangle index.
     pub prim: u32,
+    /// Ray parameter of the hit, in units of `dir`.
     pub t: f64,
+    /// Barycentric weight of `v1`.
     pub u: f64,
+    /// Barycentric weight of `v2`.
     pub v: f64,
 }
 

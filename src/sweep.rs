@@ -11,10 +11,13 @@ use crate::trace::{TraceOptions, Tracer};
 /// One cell of the sweep.
 #[derive(Clone, Debug)]
 pub struct SweepRow {
+    /// Name of the ray batch (e.g. `camera`, `random`).
     pub rays_kind: String,
+    /// The traversal measured, with its packet width and required subgroup size.
     pub traversal: Traversal,
     /// The subgroup size the pipeline ran with.
     pub subgroup_size: u32,
+    /// Rays in the batch.
     pub rays: usize,
     /// Median GPU seconds over the repetitions (after a warm-up).
     pub seconds: f64,
@@ -29,6 +32,7 @@ pub struct SweepRow {
 }
 
 impl SweepRow {
+    /// Rays per second at the median GPU time.
     pub fn rays_per_second(&self) -> f64 {
         self.rays as f64 / self.seconds
     }

@@ -70,7 +70,6 @@
 //! created, used and dropped on different threads at once: the context
 //! serialises its own queue submissions and command-pool use with mutexes
 //! (see [`GpuContext::queue_lock`] for sharing the queue with an engine).
-#![warn(missing_docs)]
 
 use std::sync::Arc;
 

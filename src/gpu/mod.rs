@@ -1,7 +1,6 @@
 //! The only module that calls Vulkan: the device context (headless, or adopted
 //! from an engine), buffers, kernels, timestamps. Every `unsafe` block carries a
 //! `// SAFETY:` line.
-#![warn(missing_docs)]
 mod buffer;
 mod context;
 mod kernel;

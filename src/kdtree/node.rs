@@ -11,7 +11,10 @@ use bytemuck::{Pod, Zeroable};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Pod, Zeroable)]
 pub struct KdNode {
+    /// Interior: split position (f32 bits). Leaf: offset into `prim_indices`.
     pub word0: u32,
+    /// Low 2 bits: axis (0..=2) or 3 for a leaf; upper 30 bits: above-child index
+    /// (interior) or primitive count (leaf).
     pub word1: u32,
 }
 
@@ -32,6 +35,7 @@ impl KdNode {
         KdNode { word0: offset, word1: 3 | (count << 2) }
     }
 
+    /// True for a leaf (low 2 bits of `word1` are 3).
     pub fn is_leaf(&self) -> bool {
         self.word1 & 3 == 3
     }
@@ -41,18 +45,23 @@ impl KdNode {
         (self.word1 & 3) as usize
     }
 
+    /// Split position of an interior node, world units along [`KdNode::axis`].
     pub fn split(&self) -> f32 {
         f32::from_bits(self.word0)
     }
 
+    /// Index of the child with coordinates `>= split` (interior nodes only); the
+    /// below child is the next node.
     pub fn above_child(&self) -> u32 {
         self.word1 >> 2
     }
 
+    /// Number of primitives of a leaf (leaves only; 0 for an empty leaf).
     pub fn prim_count(&self) -> u32 {
         self.word1 >> 2
     }
 
+    /// Index of a leaf's first entry in `prim_indices` (leaves only).
     pub fn prim_offset(&self) -> u32 {
         self.word0
     }

@@ -34,6 +34,7 @@ pub enum Variant {
 }
 
 impl Variant {
+    /// Every variant, in variant-id order (`stack` first).
     pub const ALL: [Variant; 7] = [
         Variant::Stack,
         Variant::Restart,
@@ -101,6 +102,7 @@ impl std::str::FromStr for Variant {
 /// A traversal as the kernel's specialization constants select it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Traversal {
+    /// The traversal algorithm.
     pub variant: Variant,
     /// Short-stack entries, 1..=`MAX_SHORT_STACK` (used by the short-stack variants).
     pub stack_size: u32,
@@ -162,7 +164,9 @@ impl From<Variant> for Traversal {
 pub struct Counters {
     /// Node fetches (interior and leaf), climbs of kd-backtrack included.
     pub nodes: u32,
+    /// Leaves visited (their triangles tested).
     pub leaves: u32,
+    /// Ray/triangle tests; in any-hit mode, up to and including the first hit.
     pub triangles: u32,
     /// Restarts (kd-restart, push-down, short stack running empty), backtracks or rope hops.
     pub restarts: u32,
@@ -175,9 +179,13 @@ pub struct Counters {
 /// What a traversal needs: the tree, the triangles it indexes and the scene box.
 #[derive(Clone, Copy)]
 pub struct SceneRef<'a> {
+    /// The tree's nodes, root first, depth-first order.
     pub nodes: &'a [KdNode],
+    /// Triangle indices of the leaves, addressed by [`KdNode::prim_offset`] and [`KdNode::prim_count`].
     pub prim_indices: &'a [u32],
+    /// Vertices of every triangle, indexed by triangle index.
     pub triangles: &'a [[Vec3; 3]],
+    /// The tree's root box; rays are clipped to it first.
     pub bounds: Aabb,
     /// Side buffers; needed by `Backtrack` and `Ropes` only.
     pub links: Option<&'a TreeLinks>,
