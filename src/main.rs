@@ -168,6 +168,10 @@ struct TraceArgs {
     /// Write per-ray counters (nodes, leaves, triangles, restarts, steps, drops) to this CSV.
     #[arg(long)]
     counters: Option<PathBuf>,
+    /// Trace in a coherent order (direction octant, origin Morton code, direction cell)
+    /// instead of the file's; hits and counters are still written in file order.
+    #[arg(long)]
+    sort: bool,
 }
 
 #[derive(clap::Args)]
@@ -338,9 +342,29 @@ fn trace(args: TraceArgs) -> Result<()> {
     let bar = trace_bar(rays.len());
     let start = Instant::now();
     let options = TraceOptions { traversal, counters: args.counters.is_some() };
-    let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
+    let order = args.sort.then(|| kdtrace::raygen::coherent_order(&rays, &scene.bounds));
+    let traced: Vec<kdtrace::Ray> = match &order {
+        Some(order) => order.iter().map(|&i| rays[i as usize]).collect(),
+        None => rays.clone(),
+    };
+    let mut result = tracer.trace_with_progress(&traced, &options, |n| bar.set_position(n as u64))?;
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
+    if let Some(order) = &order {
+        // Back to the file's order.
+        let mut hits = vec![kdtrace::Hit::MISS; rays.len()];
+        for (h, &i) in result.hits.iter().zip(order) {
+            hits[i as usize] = *h;
+        }
+        result.hits = hits;
+        if let Some(counters) = result.counters.as_mut() {
+            let mut unsorted = vec![Counters::default(); rays.len()];
+            for (c, &i) in counters.iter().zip(order) {
+                unsorted[i as usize] = *c;
+            }
+            *counters = unsorted;
+        }
+    }
     kdtrace::io::write_hits(&args.output, &result.hits)?;
     if let (Some(path), Some(counters)) = (&args.counters, &result.counters) {
         write_counters_csv(path, counters)?;

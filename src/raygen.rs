@@ -43,3 +43,61 @@ pub fn random_rays(bounds: &Aabb, count: usize, seed: u64) -> Vec<Ray> {
         })
         .collect()
 }
+
+/// An order that groups incoherent rays into coherent runs, for packet tracing:
+/// sorted by direction octant, then by the 3D Morton code of the origin in
+/// `bounds` (10 bits per axis), then by the direction's octahedral cell. Returns
+/// the permutation: `order[i]` is the index of the ray to trace `i`-th. Invalid
+/// rays sort last, in their original order.
+pub fn coherent_order(rays: &[Ray], bounds: &Aabb) -> Vec<u32> {
+    fn spread(v: u32) -> u64 {
+        let mut x = (v & 0x3FF) as u64;
+        x = (x | (x << 16)) & 0x0300_00FF;
+        x = (x | (x << 8)) & 0x0300_F00F;
+        x = (x | (x << 4)) & 0x030C_30C3;
+        x = (x | (x << 2)) & 0x0924_9249;
+        x
+    }
+    let extent = bounds.extent().max(Vec3::splat(f32::MIN_POSITIVE));
+    let quantize = |x: f32, lo: f32, size: f32| (((x - lo) / size).clamp(0.0, 1.0) * 1023.0) as u32;
+    let key = |r: &Ray| -> u64 {
+        if !r.is_valid() {
+            return u64::MAX;
+        }
+        let d = Vec3::from(r.dir);
+        let octant = (d.x < 0.0) as u64 | ((d.y < 0.0) as u64) << 1 | ((d.z < 0.0) as u64) << 2;
+        let o = Vec3::from(r.origin);
+        let morton = spread(quantize(o.x, bounds.min.x, extent.x))
+            | spread(quantize(o.y, bounds.min.y, extent.y)) << 1
+            | spread(quantize(o.z, bounds.min.z, extent.z)) << 2;
+        let n = d / d.abs().element_sum();
+        let cell = (quantize(n.x, -1.0, 2.0) >> 7) << 3 | (quantize(n.y, -1.0, 2.0) >> 7);
+        octant << 60 | morton << 6 | cell as u64
+    };
+    let mut order: Vec<u32> = (0..rays.len() as u32).collect();
+    order.sort_by_key(|&i| (key(&rays[i as usize]), i));
+    order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coherent_order_is_a_permutation_grouped_by_octant() {
+        let b = Aabb::new(Vec3::ZERO, Vec3::ONE);
+        let mut rays = random_rays(&b, 1000, 3);
+        rays[5].dir = [f32::NAN, 0.0, 0.0];
+        let order = coherent_order(&rays, &b);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert!(sorted.iter().copied().eq(0..1000));
+        assert_eq!(*order.last().unwrap(), 5, "invalid rays sort last");
+        let octant = |i: u32| {
+            let d = rays[i as usize].dir;
+            (d[0] < 0.0) as u8 | ((d[1] < 0.0) as u8) << 1 | ((d[2] < 0.0) as u8) << 2
+        };
+        let changes = order[..999].windows(2).filter(|w| octant(w[0]) != octant(w[1])).count();
+        assert!(changes <= 7, "octants form contiguous runs ({changes} changes)");
+    }
+}

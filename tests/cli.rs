@@ -128,6 +128,21 @@ fn counters_csv_heatmap_and_any_hit() {
     assert!(rows.iter().any(|r| r[3] > 0 && r[6] > 0), "some rays test triangles and drop stack entries");
 
     let closest = kdtrace::io::read_hits(&hits).unwrap();
+    let sorted_hits = temp("teapot-sorted.hits");
+    let o = kdtrace(&[
+        "trace",
+        scene.to_str().unwrap(),
+        rays.to_str().unwrap(),
+        "-o",
+        sorted_hits.to_str().unwrap(),
+        "--traversal",
+        "short-stack",
+        "--stack-size",
+        "2",
+        "--sort",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(kdtrace::io::read_hits(&sorted_hits).unwrap(), closest, "--sort writes hits in file order");
     let o =
         kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap(), "--any-hit"]);
     assert!(o.status.success(), "{}", stderr(&o));
