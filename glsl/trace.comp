@@ -24,10 +24,17 @@ layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1.
 layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
 layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
 
-layout(std430, set = 0, binding = BINDING_NODES) readonly buffer Nodes { uvec2 nodes[]; };
+// Nodes and triangles are uniform texel buffers, not storage buffers: lavapipe
+// (22.x) loads a storage buffer one lane and one 32-bit component at a time, in a
+// branchy loop, whereas a texel fetch is a straight-line gather of whole texels.
+// Nodes: R32G32_UINT, one texel per node. Triangles: R32G32B32A32_UINT, three
+// texels per leaf reference, in prim_indices order: (v0, prim), (v1, 0), (v2, 0).
+layout(set = 0, binding = BINDING_NODES) uniform usamplerBuffer node_texels;
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
-layout(std430, set = 0, binding = BINDING_TRIANGLES) readonly buffer Triangles { float tri_verts[]; };
-layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
+layout(set = 0, binding = BINDING_TRIANGLES) uniform usamplerBuffer tri_texels;
+// Rays are read as four 64-bit words (bits only, no float64 arithmetic): lavapipe
+// loads storage buffers per lane and per component, so 4 loads beat 8.
+layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { double ray_words[]; };
 layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Counters { uint counters[]; };
 // Side buffers of backtrack and ropes (a 4-byte dummy is bound for the others).
@@ -57,7 +64,15 @@ bool ray_is_valid(Ray ray) {
 void main() {
     uint index = gl_GlobalInvocationID.x;
     if (index >= params.ray_count) return;
-    Ray ray = rays[index];
+    uvec2 w0 = unpackDouble2x32(ray_words[4u * index + 0u]);
+    uvec2 w1 = unpackDouble2x32(ray_words[4u * index + 1u]);
+    uvec2 w2 = unpackDouble2x32(ray_words[4u * index + 2u]);
+    uvec2 w3 = unpackDouble2x32(ray_words[4u * index + 3u]);
+    Ray ray;
+    ray.origin = uintBitsToFloat(uvec3(w0, w1.x));
+    ray.tmin = uintBitsToFloat(w1.y);
+    ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
+    ray.tmax = uintBitsToFloat(w3.y);
 
     Hit best;
     best.t = ray.tmax;

@@ -167,26 +167,39 @@ impl SceneBuffers {
         tree.check(triangles.len()).map_err(|e| {
             Error::InvalidInput(format!("the kd-tree does not fit its {} triangles: {e}", triangles.len()))
         })?;
-        let verts: Vec<f32> = triangles.iter().flat_map(|t| t.iter().flat_map(|v| v.to_array())).collect();
+        // Triangle texels (R32G32B32A32_UINT) in prim_indices order, so a leaf's
+        // triangles are contiguous and need no index load: (v0, prim), (v1, 0), (v2, 0).
+        let tri_texels: Vec<[u32; 4]> = tree
+            .prim_indices
+            .iter()
+            .flat_map(|&p| {
+                let [a, b, c] = triangles[p as usize].map(|v| v.to_array().map(f32::to_bits));
+                [[a[0], a[1], a[2], p], [b[0], b[1], b[2], 0], [c[0], c[1], c[2], 0]]
+            })
+            .collect();
         let limit = ctx.info.max_storage_buffer_range;
-        let sizes = [
-            ("kd-tree nodes", std::mem::size_of_val(tree.nodes.as_slice())),
-            ("primitive indices", std::mem::size_of_val(tree.prim_indices.as_slice())),
-            ("triangle vertices", std::mem::size_of_val(verts.as_slice())),
-        ];
-        for (what, bytes) in sizes {
-            if bytes as u64 > limit {
+        let bytes = std::mem::size_of_val(tree.prim_indices.as_slice());
+        if bytes as u64 > limit {
+            return Err(Error::DeviceLimit(format!(
+                "the scene's primitive indices take {bytes} bytes; {} allows {limit} per storage buffer (maxStorageBufferRange)",
+                ctx.info.name
+            )));
+        }
+        let texel_limit = ctx.info.max_texel_buffer_elements;
+        for (what, texels) in [("kd-tree nodes", tree.nodes.len()), ("triangle texels", tri_texels.len())] {
+            if texels as u64 > texel_limit {
                 return Err(Error::DeviceLimit(format!(
-                    "the scene's {what} take {bytes} bytes; {} allows {limit} per storage buffer (maxStorageBufferRange)",
+                    "the scene's {what} take {texels} texels; {} allows {texel_limit} per texel buffer (maxTexelBufferElements)",
                     ctx.info.name
                 )));
             }
         }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         Ok(SceneBuffers {
-            nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), usage, "kd-tree nodes")?,
+            nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), texel_usage, "kd-tree nodes")?,
             prim_indices: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,
-            triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&verts), usage, "triangle vertices")?,
+            triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&tri_texels), texel_usage, "triangle texels")?,
             bounds: tree.bounds,
             host_nodes: tree.nodes.clone(),
             links: None,
@@ -372,6 +385,10 @@ impl Tracer {
                 ],
                 workgroup_size: TRACE_WORKGROUP_SIZE,
                 required_subgroup_size: key.subgroup_size,
+                texel_buffers: &[
+                    (BINDING_NODES, vk::Format::R32G32_UINT),
+                    (BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
+                ],
                 // Packets decide by ballots.
                 required_subgroup_operations: if key.packet_width > 1 {
                     vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
@@ -449,6 +466,13 @@ impl Tracer {
         named.extend(counters.map(|c| ("counters", c, COUNTER_BYTES)));
         for (what, range, _) in &named {
             check_range(&self.ctx, what, range)?;
+        }
+        // trace.comp reads rays as 64-bit words.
+        if rays.offset % 8 != 0 {
+            return Err(Error::InvalidInput(format!(
+                "the rays range must start at a multiple of 8 bytes, got offset {}",
+                rays.offset
+            )));
         }
         for (i, (a, ra, _)) in named.iter().enumerate() {
             for (b, rb, _) in &named[i + 1..] {

@@ -24,11 +24,16 @@ struct TraceCounters {
     uint drops;
 };
 
+// Loads a node (see trace.comp for the texel layout).
+uvec2 load_node(uint node) {
+    return texelFetch(node_texels, int(node)).xy;
+}
+
 // Fetches a node, counting the visit and the loop step.
 uvec2 fetch_node(uint node, inout TraceCounters c) {
     c.steps += 1u;
     c.nodes += 1u;
-    return nodes[node];
+    return load_node(node);
 }
 
 // Clip [ray.tmin, ray.tmax] to the scene box (slab test). A zero direction
@@ -90,11 +95,13 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
     uint i = 0u;
     bool stopped = false;
     for (; i < count; ++i) {
-        uint prim = prim_indices[offset + i];
-        uint base = prim * 9u;
-        vec3 v0 = vec3(tri_verts[base + 0u], tri_verts[base + 1u], tri_verts[base + 2u]);
-        vec3 v1 = vec3(tri_verts[base + 3u], tri_verts[base + 4u], tri_verts[base + 5u]);
-        vec3 v2 = vec3(tri_verts[base + 6u], tri_verts[base + 7u], tri_verts[base + 8u]);
+        // The leaf's references are stored in prim_indices order, the prim id inline.
+        int base = int(offset + i) * 3;
+        uvec4 a = texelFetch(tri_texels, base);
+        vec3 v0 = uintBitsToFloat(a.xyz);
+        vec3 v1 = uintBitsToFloat(texelFetch(tri_texels, base + 1).xyz);
+        vec3 v2 = uintBitsToFloat(texelFetch(tri_texels, base + 2).xyz);
+        uint prim = a.w;
         float t, u, v;
         if (intersect_triangle(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v)) {
             best.t = t;

@@ -27,7 +27,7 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Hit be
     if (!packet_any(lane_on, mask)) return true;
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
         c.steps += 1u;
-        uvec2 n = nodes[node];
+        uvec2 n = load_node(node);
         if (lane_on) c.nodes += 1u;
         if (!node_is_leaf(n)) {
             LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, false);

@@ -11,9 +11,12 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
     uint node = 0u;
     float t1 = t1_scene;
     bool ties_go_far = false;
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    uint step = 0u;
+    // While-while form, as in stack.glsl: descend to a leaf, then visit it.
+    while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
-        if (!node_is_leaf(n)) {
+        ++step;
+        while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
@@ -25,7 +28,9 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
             } else {
                 node = near;
             }
-            continue;
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
         }
         // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
         uint face;

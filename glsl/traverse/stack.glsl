@@ -5,15 +5,25 @@
 #define TRAVERSE_STACK_GLSL
 
 // Returns true when traversal finished; false when it was cut short.
+//
+// While-while form (Aila & Laine 2009): an inner loop descends to a leaf, then the
+// leaf is visited. Same nodes in the same order and the same step count as a
+// one-loop form, but on SIMD drivers (lavapipe runs 8 lanes under one mask and
+// never skips a masked-off block) the leaf block - the triangle test - no longer
+// runs once per interior step, and lanes reach their leaves together. The single
+// push site matters for the same reason: each private-array store is a per-lane
+// scatter whether or not any lane pushes.
 bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
     uint stack_node[MAX_STACK];
     float stack_t0[MAX_STACK];
     float stack_t1[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    uint step = 0u;
+    while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
-        if (!node_is_leaf(n)) {
+        ++step;
+        while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, false, near, far, ts);
@@ -21,15 +31,18 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
                 node = near;
             } else if (visit == VISIT_FAR) {
                 node = far;
-            } else if (visit == VISIT_BOTH_SAME) {
-                stack_node[sp] = far; stack_t0[sp] = t0; stack_t1[sp] = t1; ++sp;
-                node = near;
             } else {
-                stack_node[sp] = far; stack_t0[sp] = ts; stack_t1[sp] = t1; ++sp;
+                // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
+                stack_node[sp] = far;
+                stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
+                stack_t1[sp] = t1;
+                ++sp;
                 node = near;
-                t1 = ts;
+                if (visit == VISIT_BOTH) t1 = ts;
             }
-            continue;
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;

@@ -71,6 +71,8 @@ pub struct DeviceInfo {
     pub max_storage_buffer_range: u64,
     /// `minStorageBufferOffsetAlignment`: storage-buffer descriptor offsets must be multiples of it.
     pub min_storage_buffer_offset_alignment: u64,
+    /// `maxTexelBufferElements`: the most texels one texel-buffer view may address.
+    pub max_texel_buffer_elements: u64,
     /// `maxComputeWorkGroupCount[0]`.
     pub max_workgroup_count_x: u32,
     /// `maxMemoryAllocationSize` (Vulkan 1.1 maintenance3).
@@ -689,6 +691,7 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> De
             vk::SubgroupFeatureFlags::empty()
         },
         max_storage_buffer_range: props.limits.max_storage_buffer_range as u64,
+        max_texel_buffer_elements: props.limits.max_texel_buffer_elements as u64,
         min_storage_buffer_offset_alignment: props.limits.min_storage_buffer_offset_alignment.max(1),
         max_workgroup_count_x: props.limits.max_compute_work_group_count[0],
         max_memory_allocation_size: maint3.max_memory_allocation_size,

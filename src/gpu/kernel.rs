@@ -17,8 +17,10 @@ pub struct Kernel {
     pub layout: vk::PipelineLayout,
     /// The layout of set 0: storage buffers at bindings `0..bindings`.
     pub set_layout: vk::DescriptorSetLayout,
-    /// Number of storage-buffer bindings of set 0.
+    /// Number of bindings of set 0 (storage buffers, except `texel_buffers`).
     pub bindings: u32,
+    /// Bindings that are uniform texel buffers, with their view formats.
+    pub texel_buffers: Vec<(u32, vk::Format)>,
     /// Bytes of push constants (0: none).
     pub push_constant_size: u32,
     /// The kernel's `local_size_x`.
@@ -46,6 +48,9 @@ pub struct KernelDesc<'a> {
     /// Subgroup operations the kernel uses; a device without them in compute
     /// shaders gets `Error::DeviceLimit` naming the missing ones.
     pub required_subgroup_operations: vk::SubgroupFeatureFlags,
+    /// Bindings that are uniform texel buffers (`usamplerBuffer` etc.) instead of
+    /// storage buffers, with the format of the view a [`BufferSet`] makes for them.
+    pub texel_buffers: &'a [(u32, vk::Format)],
 }
 
 impl Kernel {
@@ -54,11 +59,17 @@ impl Kernel {
         let device = &ctx.device;
         let code = ash::util::read_spv(&mut std::io::Cursor::new(desc.spirv))
             .map_err(|e| Error::InvalidInput(format!("kernel {}: bad SPIR-V: {e}", desc.name)))?;
+        if let Some((b, _)) = desc.texel_buffers.iter().find(|(b, _)| *b >= desc.bindings) {
+            return Err(Error::InvalidInput(format!(
+                "kernel {}: texel-buffer binding {b} is not below its {} bindings",
+                desc.name, desc.bindings
+            )));
+        }
         let bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..desc.bindings)
             .map(|b| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_type(descriptor_type(desc.texel_buffers, b))
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -149,6 +160,7 @@ impl Kernel {
                 layout,
                 set_layout,
                 bindings: desc.bindings,
+                texel_buffers: desc.texel_buffers.to_vec(),
                 push_constant_size: desc.push_constant_size,
                 workgroup_size: desc.workgroup_size.max(1),
                 ctx: ctx.clone(),
@@ -198,12 +210,33 @@ impl Drop for Kernel {
     }
 }
 
+/// The descriptor type of `binding`: a uniform texel buffer when `texel_buffers` names it.
+fn descriptor_type(texel_buffers: &[(u32, vk::Format)], binding: u32) -> vk::DescriptorType {
+    if texel_buffers.iter().any(|(b, _)| *b == binding) {
+        vk::DescriptorType::UNIFORM_TEXEL_BUFFER
+    } else {
+        vk::DescriptorType::STORAGE_BUFFER
+    }
+}
+
+/// Bytes per texel of the view formats kernels use.
+fn texel_bytes(format: vk::Format) -> Option<u64> {
+    match format {
+        vk::Format::R32_UINT | vk::Format::R32_SFLOAT => Some(4),
+        vk::Format::R32G32_UINT | vk::Format::R32G32_SFLOAT => Some(8),
+        vk::Format::R32G32B32A32_UINT | vk::Format::R32G32B32A32_SFLOAT => Some(16),
+        _ => None,
+    }
+}
+
 /// A descriptor pool holding one set of storage buffers. Dropping it destroys the
 /// pool and the set, so it must outlive every command buffer that uses the set.
 pub struct BufferSet {
     /// The descriptor set (set 0 of the kernel it was made for).
     pub set: vk::DescriptorSet,
     pool: vk::DescriptorPool,
+    /// Views of the kernel's texel-buffer bindings.
+    views: Vec<vk::BufferView>,
     ctx: Arc<GpuContext>,
 }
 
@@ -222,7 +255,8 @@ impl BufferSet {
     ///
     /// # Safety
     /// Each range's buffer must be a live buffer of this device created with
-    /// `STORAGE_BUFFER` usage and at least `offset + range` bytes, bound to memory,
+    /// `STORAGE_BUFFER` usage (`UNIFORM_TEXEL_BUFFER` for the kernel's texel-buffer
+    /// bindings) and at least `offset + range` bytes, bound to memory,
     /// and stay alive while the set is used by any command buffer.
     pub unsafe fn from_ranges(ctx: &Arc<GpuContext>, kernel: &Kernel, ranges: &[BufferRange]) -> Result<BufferSet> {
         if ranges.len() as u32 != kernel.bindings {
@@ -233,16 +267,54 @@ impl BufferSet {
             )));
         }
         for (binding, r) in ranges.iter().enumerate() {
-            check_range(ctx, &format!("binding {binding}"), r)?;
+            match kernel.texel_buffers.iter().find(|(b, _)| *b == binding as u32) {
+                Some(&(_, format)) => check_texel_range(ctx, &format!("binding {binding}"), r, format)?,
+                None => check_range(ctx, &format!("binding {binding}"), r)?,
+            }
         }
         let device = &ctx.device;
-        let sizes =
-            [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: kernel.bindings }];
-        // SAFETY: valid create/allocate infos; the pool is destroyed in Drop.
+        let texel_count = kernel.texel_buffers.len() as u32;
+        let sizes: Vec<vk::DescriptorPoolSize> = [
+            (vk::DescriptorType::STORAGE_BUFFER, kernel.bindings - texel_count),
+            (vk::DescriptorType::UNIFORM_TEXEL_BUFFER, texel_count),
+        ]
+        .into_iter()
+        .filter(|&(_, n)| n > 0)
+        .map(|(ty, descriptor_count)| vk::DescriptorPoolSize { ty, descriptor_count })
+        .collect();
+        // SAFETY: valid create/allocate infos; the views and the pool are destroyed in
+        // Drop or on the error paths.
         unsafe {
-            let pool = device
+            let mut views: Vec<(u32, [vk::BufferView; 1])> = Vec::new();
+            for &(binding, format) in &kernel.texel_buffers {
+                let r = &ranges[binding as usize];
+                let info =
+                    vk::BufferViewCreateInfo::default().buffer(r.buffer).format(format).offset(r.offset).range(r.range);
+                match device.create_buffer_view(&info, None).vk("vkCreateBufferView") {
+                    Ok(v) => views.push((binding, [v])),
+                    Err(e) => {
+                        for (_, [v]) in views {
+                            device.destroy_buffer_view(v, None);
+                        }
+                        return Err(e);
+                    }
+                }
+            }
+            let destroy_views = |views: &[(u32, [vk::BufferView; 1])]| {
+                for (_, [v]) in views {
+                    device.destroy_buffer_view(*v, None);
+                }
+            };
+            let pool = match device
                 .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(1).pool_sizes(&sizes), None)
-                .vk("vkCreateDescriptorPool")?;
+                .vk("vkCreateDescriptorPool")
+            {
+                Ok(p) => p,
+                Err(e) => {
+                    destroy_views(&views);
+                    return Err(e);
+                }
+            };
             let layouts = [kernel.set_layout];
             let set = match device
                 .allocate_descriptor_sets(
@@ -253,6 +325,7 @@ impl BufferSet {
                 Ok(s) => s[0],
                 Err(e) => {
                     device.destroy_descriptor_pool(pool, None);
+                    destroy_views(&views);
                     return Err(e);
                 }
             };
@@ -264,17 +337,47 @@ impl BufferSet {
                 .iter()
                 .enumerate()
                 .map(|(i, info)| {
-                    vk::WriteDescriptorSet::default()
-                        .dst_set(set)
-                        .dst_binding(i as u32)
-                        .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                        .buffer_info(info)
+                    let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(i as u32);
+                    match views.iter().find(|(b, _)| *b == i as u32) {
+                        Some((_, view)) => {
+                            write.descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER).texel_buffer_view(view)
+                        }
+                        None => write.descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info),
+                    }
                 })
                 .collect();
             device.update_descriptor_sets(&writes, &[]);
-            Ok(BufferSet { set, pool, ctx: ctx.clone() })
+            let views = views.into_iter().map(|(_, [v])| v).collect();
+            Ok(BufferSet { set, pool, views, ctx: ctx.clone() })
         }
     }
+}
+
+/// Checks a texel-buffer range (viewed as `format`) against the device's limits.
+/// Texel-buffer ranges must start at offset 0 (kdtrace binds its scene buffers whole).
+pub(crate) fn check_texel_range(ctx: &GpuContext, what: &str, r: &BufferRange, format: vk::Format) -> Result<()> {
+    let info = &ctx.info;
+    let Some(bytes) = texel_bytes(format) else {
+        return Err(Error::InvalidInput(format!("{what}: unsupported texel-buffer format {format:?}")));
+    };
+    if r.buffer == vk::Buffer::null() {
+        return Err(Error::InvalidInput(format!("{what}: the buffer is VK_NULL_HANDLE")));
+    }
+    if r.offset != 0 || r.range == 0 || r.range == vk::WHOLE_SIZE || r.range % bytes != 0 {
+        return Err(Error::InvalidInput(format!(
+            "{what}: a texel-buffer range must start at 0 and hold whole {bytes}-byte texels, got offset {} range {}",
+            r.offset, r.range
+        )));
+    }
+    if r.range / bytes > info.max_texel_buffer_elements {
+        return Err(Error::DeviceLimit(format!(
+            "{what}: {} texels exceed maxTexelBufferElements ({}) on {}",
+            r.range / bytes,
+            info.max_texel_buffer_elements,
+            info.name
+        )));
+    }
+    Ok(())
 }
 
 /// Checks a storage-buffer range against the device's limits; `what` names it in errors.
@@ -303,8 +406,13 @@ pub(crate) fn check_range(ctx: &GpuContext, what: &str, r: &BufferRange) -> Resu
 
 impl Drop for BufferSet {
     fn drop(&mut self) {
-        // SAFETY: no pending work uses the set.
-        unsafe { self.ctx.device.destroy_descriptor_pool(self.pool, None) };
+        // SAFETY: no pending work uses the set or its views.
+        unsafe {
+            self.ctx.device.destroy_descriptor_pool(self.pool, None);
+            for &v in &self.views {
+                self.ctx.device.destroy_buffer_view(v, None);
+            }
+        }
     }
 }
 
