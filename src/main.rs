@@ -181,6 +181,30 @@ struct StatsArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Build this many times; report the fastest and the median build time.
+    #[arg(long, default_value_t = 1)]
+    repeat: u32,
+    /// Builder parameters to start from: default | pbrt-v3 | wald-havran.
+    #[arg(long, default_value = "default")]
+    config: String,
+    /// Override K_T, the cost of traversing a node.
+    #[arg(long)]
+    traversal_cost: Option<f32>,
+    /// Override K_I, the cost of a ray/triangle test.
+    #[arg(long)]
+    intersection_cost: Option<f32>,
+    /// Override the empty-space bonus (0 ≤ b < 1).
+    #[arg(long)]
+    empty_bonus: Option<f32>,
+    /// Override the depth limit (default: 8 + 1.3·log2 N, capped).
+    #[arg(long)]
+    max_depth: Option<u32>,
+    /// Clip only triangle boxes at splits, not the triangles (no "perfect splits").
+    #[arg(long)]
+    box_clipping: bool,
+    /// Worker threads for the build (default: one per core).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(clap::Args)]
@@ -506,40 +530,106 @@ fn subgroups(args: SubgroupsArgs) -> Result<()> {
 }
 
 fn stats(args: StatsArgs) -> Result<()> {
-    let (scene, tree) = load_and_build(&args.scene)?;
+    let mut config = match args.config.as_str() {
+        "default" => BuildConfig::default(),
+        "pbrt-v3" => BuildConfig::PBRT_V3,
+        "wald-havran" => BuildConfig::WALD_HAVRAN,
+        other => bail!("unknown --config '{other}' (default, pbrt-v3, wald-havran)"),
+    };
+    config.traversal_cost = args.traversal_cost.unwrap_or(config.traversal_cost);
+    config.intersection_cost = args.intersection_cost.unwrap_or(config.intersection_cost);
+    config.empty_bonus = args.empty_bonus.unwrap_or(config.empty_bonus);
+    config.max_depth = args.max_depth.or(config.max_depth);
+    config.perfect_splits &= !args.box_clipping;
+    if !(config.traversal_cost >= 0.0 && config.intersection_cost > 0.0 && (0.0..1.0).contains(&config.empty_bonus)) {
+        bail!("costs must be finite with K_T >= 0, K_I > 0 and 0 <= empty bonus < 1");
+    }
+    if args.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let scene = Scene::load(&args.scene)?;
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(threads) = args.threads {
+        pool = pool.num_threads(threads);
+    }
+    let pool = pool.build().context("starting the build threads")?;
+    let mut times = Vec::new();
+    let mut tree = None;
+    for _ in 0..args.repeat {
+        drop(tree.take());
+        let built = pool.install(|| KdTree::build(&scene.triangles, &config));
+        times.push(built.stats.build_seconds);
+        tree = Some(built);
+    }
+    let tree = tree.expect("built at least once");
+    times.sort_by(f64::total_cmp);
+    let (fastest, median) = (times[0], times[times.len() / 2]);
     let s = &tree.stats;
-    let node_bytes = std::mem::size_of_val(tree.nodes.as_slice());
-    let index_bytes = std::mem::size_of_val(tree.prim_indices.as_slice());
     if args.json {
         println!(
-            "{{\"scene\":{:?},\"triangles\":{},\"degenerate\":{},\"nodes\":{},\"leaves\":{},\"empty_leaves\":{},\"max_depth\":{},\"mean_leaf_depth\":{},\"refs_per_triangle\":{},\"mean_prims_per_leaf\":{},\"max_prims_per_leaf\":{},\"sah_cost\":{},\"build_seconds\":{},\"node_bytes\":{},\"index_bytes\":{}}}",
+            "{{\"scene\":{:?},\"triangles\":{},\"degenerate\":{},\"skipped\":{},\"nodes\":{},\"leaves\":{},\"empty_leaves\":{},\"depth_limit\":{},\"max_depth\":{},\"mean_leaf_depth\":{},\"refs_per_triangle\":{},\"mean_prims_per_leaf\":{},\"max_prims_per_leaf\":{},\"sah_cost\":{},\"build_seconds\":{},\"build_seconds_median\":{},\"builds\":{},\"threads\":{},\"node_bytes\":{},\"index_bytes\":{},\"peak_scratch_bytes\":{},\"traversal_cost\":{},\"intersection_cost\":{},\"empty_bonus\":{},\"perfect_splits\":{}}}",
             args.scene.display().to_string(),
             scene.triangles.len(),
             scene.degenerate_count,
+            s.skipped_triangles,
             s.nodes,
             s.leaves,
             s.empty_leaves,
+            s.depth_limit,
             s.max_depth,
             s.mean_leaf_depth,
             s.refs_per_triangle,
             s.mean_prims_per_leaf,
             s.max_prims_per_leaf,
             s.sah_cost,
-            s.build_seconds,
-            node_bytes,
-            index_bytes
+            fastest,
+            median,
+            times.len(),
+            s.threads,
+            s.node_bytes,
+            s.index_bytes,
+            s.peak_scratch_bytes,
+            config.traversal_cost,
+            config.intersection_cost,
+            config.empty_bonus,
+            config.perfect_splits
         );
     } else {
+        let mib = |b: usize| b as f64 / (1 << 20) as f64;
         println!("scene               {}", args.scene.display());
-        println!("triangles           {} ({} zero-area)", scene.triangles.len(), scene.degenerate_count);
+        println!(
+            "triangles           {} ({} zero-area, {} left out)",
+            scene.triangles.len(),
+            scene.degenerate_count,
+            s.skipped_triangles
+        );
+        println!(
+            "config              K_T {} K_I {} empty bonus {} perfect splits {}",
+            config.traversal_cost, config.intersection_cost, config.empty_bonus, config.perfect_splits
+        );
         println!("nodes               {}", s.nodes);
         println!("leaves              {} ({} empty)", s.leaves, s.empty_leaves);
-        println!("depth               max {}, mean leaf {:.2}", s.max_depth, s.mean_leaf_depth);
+        println!(
+            "depth               max {} (limit {}), mean leaf {:.2}",
+            s.max_depth, s.depth_limit, s.mean_leaf_depth
+        );
         println!("refs per triangle   {:.3}", s.refs_per_triangle);
         println!("prims per leaf      mean {:.2} (non-empty), max {}", s.mean_prims_per_leaf, s.max_prims_per_leaf);
         println!("SAH cost            {:.3}", s.sah_cost);
-        println!("build time          {:.3} s", s.build_seconds);
-        println!("memory              {} B nodes, {} B indices", node_bytes, index_bytes);
+        println!(
+            "build time          {:.3} s (fastest of {}, median {:.3} s) on {} threads",
+            fastest,
+            times.len(),
+            median,
+            s.threads
+        );
+        println!(
+            "memory              {} B nodes + {} B indices = {:.1} MiB; build scratch peak {:.1} MiB",
+            s.node_bytes,
+            s.index_bytes,
+            mib(s.node_bytes + s.index_bytes),
+            mib(s.peak_scratch_bytes)
+        );
     }
     Ok(())
 }

@@ -3,6 +3,8 @@
 //! pbrt-v3's `KdTreeAccel` statistics).
 
 use super::build::{BuildConfig, KdTree};
+use super::KdNode;
+use crate::geom::Aabb;
 
 /// What a build produced. Computed once, after the build, by walking the tree.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -36,6 +38,16 @@ pub struct BuildStats {
     pub sah_cost: f64,
     /// Wall time of the build itself (not of computing these statistics).
     pub build_seconds: f64,
+    /// Bytes of the node array (`nodes.len() · 8`).
+    pub node_bytes: usize,
+    /// Bytes of the primitive index array (`prim_indices.len() · 4`).
+    pub index_bytes: usize,
+    /// Peak bytes of the builder's scratch data (sorted event lists and
+    /// per-node triangle lists, summed over all threads) during the build.
+    /// Depends a little on scheduling; the tree itself does not.
+    pub peak_scratch_bytes: usize,
+    /// Worker threads the build could use (rayon's pool size).
+    pub threads: usize,
 }
 
 impl BuildStats {
@@ -54,34 +66,97 @@ impl BuildStats {
             nodes: tree.nodes.len(),
             depth_limit: config.depth_limit(triangles),
             build_seconds,
+            node_bytes: std::mem::size_of_val(tree.nodes.as_slice()),
+            index_bytes: std::mem::size_of_val(tree.prim_indices.as_slice()),
             ..BuildStats::default()
         };
         let root_area = tree.bounds.area() as f64;
         let inv_root = if root_area > 0.0 { 1.0 / root_area } else { 0.0 };
-        let (k_t, k_i) = (config.traversal_cost as f64, config.intersection_cost as f64);
-        let mut depth_sum = 0u64;
-        let mut refs = 0u64;
-        tree.for_each_node(|_, node, bounds, depth| {
-            let rel_area = bounds.area() as f64 * inv_root;
-            if node.is_leaf() {
-                let n = node.prim_count();
-                s.leaves += 1;
-                s.empty_leaves += (n == 0) as usize;
-                s.max_depth = s.max_depth.max(depth);
-                s.max_prims_per_leaf = s.max_prims_per_leaf.max(n);
-                depth_sum += depth as u64;
-                refs += n as u64;
-                s.sah_cost += k_i * n as f64 * rel_area;
-            } else {
-                s.sah_cost += k_t * rel_area;
-            }
-        });
+        let costs = (config.traversal_cost as f64 * inv_root, config.intersection_cost as f64 * inv_root);
+        let sums = Sums::gather(tree, 0, tree.bounds, 0, costs);
+        s.leaves = sums.leaves;
+        s.empty_leaves = sums.empty_leaves;
+        s.max_depth = sums.max_depth;
+        s.max_prims_per_leaf = sums.max_prims;
+        s.sah_cost = sums.sah_cost;
+        let (depth_sum, refs) = (sums.depth_sum, sums.refs);
         let ratio = |a: u64, b: usize| if b > 0 { a as f64 / b as f64 } else { 0.0 };
         s.mean_leaf_depth = ratio(depth_sum, s.leaves);
         s.refs_per_triangle = ratio(refs, triangles);
         s.mean_prims_per_leaf = ratio(refs, s.leaves - s.empty_leaves);
         s
     }
+}
+
+/// Sums over a subtree, gathered in parallel near the root.
+#[derive(Default)]
+struct Sums {
+    leaves: usize,
+    empty_leaves: usize,
+    max_depth: u32,
+    max_prims: u32,
+    depth_sum: u64,
+    refs: u64,
+    sah_cost: f64,
+}
+
+impl Sums {
+    /// Subtrees this close to the root are walked as parallel tasks; the split
+    /// is fixed, so the floating-point sums do not depend on the thread count.
+    const PARALLEL_DEPTH: u32 = 6;
+
+    /// The sums over the subtree of node `index` with box `bounds` at `depth`,
+    /// with `costs` = (`K_T`, `K_I`) / root area.
+    fn gather(tree: &KdTree, index: u32, bounds: Aabb, depth: u32, costs: (f64, f64)) -> Sums {
+        let node = tree.nodes[index as usize];
+        if depth < Self::PARALLEL_DEPTH && !node.is_leaf() {
+            let (below, above) = split_box(&node, bounds);
+            let (a, b) = rayon::join(
+                || Sums::gather(tree, index + 1, below, depth + 1, costs),
+                || Sums::gather(tree, node.above_child(), above, depth + 1, costs),
+            );
+            return Sums {
+                leaves: a.leaves + b.leaves,
+                empty_leaves: a.empty_leaves + b.empty_leaves,
+                max_depth: a.max_depth.max(b.max_depth),
+                max_prims: a.max_prims.max(b.max_prims),
+                depth_sum: a.depth_sum + b.depth_sum,
+                refs: a.refs + b.refs,
+                sah_cost: costs.0 * bounds.area() as f64 + a.sah_cost + b.sah_cost,
+            };
+        }
+        let mut s = Sums::default();
+        let mut stack = vec![(index, bounds, depth)];
+        while let Some((index, bounds, depth)) = stack.pop() {
+            let node = tree.nodes[index as usize];
+            let area = bounds.area() as f64;
+            if node.is_leaf() {
+                let n = node.prim_count();
+                s.leaves += 1;
+                s.empty_leaves += (n == 0) as usize;
+                s.max_depth = s.max_depth.max(depth);
+                s.max_prims = s.max_prims.max(n);
+                s.depth_sum += depth as u64;
+                s.refs += n as u64;
+                s.sah_cost += costs.1 * n as f64 * area;
+            } else {
+                s.sah_cost += costs.0 * area;
+                let (below, above) = split_box(&node, bounds);
+                stack.push((node.above_child(), above, depth + 1));
+                stack.push((index + 1, below, depth + 1));
+            }
+        }
+        s
+    }
+}
+
+/// The boxes of an interior node's below and above children.
+fn split_box(node: &KdNode, bounds: Aabb) -> (Aabb, Aabb) {
+    let (axis, split) = (node.axis(), node.split());
+    let (mut below, mut above) = (bounds, bounds);
+    below.max[axis] = split;
+    above.min[axis] = split;
+    (below, above)
 }
 
 impl std::fmt::Display for BuildStats {
