@@ -9,6 +9,10 @@ pub const MAX_TREE_DEPTH: u32 = 48;
 pub const MAX_STACK: u32 = MAX_TREE_DEPTH + 1;
 /// Traversal steps after which a ray gives up and is reported as capped.
 pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
+/// The watertight test's error bound on an f32 edge function is
+/// `2^-EDGE_GAMMA_LOG2` times the magnitude of its terms (twice the worst case of
+/// about 12 roundings of 2^-24); within it the test is redone in f64.
+pub const EDGE_GAMMA_LOG2: u32 = 19;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;
 /// `ropes` entry of a face on the scene boundary.
@@ -83,6 +87,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAX_STACK", MAX_STACK),
     ("MAX_TRAVERSAL_STEPS", MAX_TRAVERSAL_STEPS),
     ("MAX_SHORT_STACK", MAX_SHORT_STACK),
+    ("EDGE_GAMMA_LOG2", EDGE_GAMMA_LOG2),
     ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),

@@ -2,7 +2,7 @@
 //! boxes, rays, hits and the watertight ray/triangle test.
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// An axis-aligned box. The empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -161,6 +161,21 @@ pub struct WatertightRay {
     pub sz: f32,
     /// Ray origin; the vertices are translated by `-origin` before the shear.
     pub origin: Vec3,
+    /// Ray direction, for the f64 fallback near edges.
+    pub dir: Vec3,
+}
+
+/// The bound on an f32 edge function's error, relative to the magnitude of its
+/// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
+pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
+
+/// `d · (p × q)` in f64, in a fixed order (exact negation when `p` and `q` swap).
+#[inline]
+fn triple(d: DVec3, p: DVec3, q: DVec3) -> f64 {
+    let x = p.y * q.z - p.z * q.y;
+    let y = p.z * q.x - p.x * q.z;
+    let z = p.x * q.y - p.y * q.x;
+    d.x * x + d.y * y + d.z * z
 }
 
 impl WatertightRay {
@@ -182,7 +197,7 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin }
+        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin, dir }
     }
 
     /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
@@ -204,18 +219,28 @@ impl WatertightRay {
         let cx = c[kx] - self.sx * c[kz];
         let cy = c[ky] - self.sy * c[kz];
         // Scaled barycentric coordinates (edge functions).
-        let mut u = cx * by - cy * bx;
-        let mut v = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        // On an edge, recompute in double precision so the sign is exact.
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-            u = (cx * by - cy * bx) as f32;
-            v = (ax * cy - ay * cx) as f32;
-            w = (bx * ay - by * ax) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
+        let aex = a[kx].abs() + (self.sx * a[kz]).abs();
+        let aey = a[ky].abs() + (self.sy * a[kz]).abs();
+        let bex = b[kx].abs() + (self.sx * b[kz]).abs();
+        let bey = b[ky].abs() + (self.sy * b[kz]).abs();
+        let cex = c[kx].abs() + (self.sx * c[kz]).abs();
+        let cey = c[ky].abs() + (self.sy * c[kz]).abs();
+        let eu = EDGE_GAMMA * (cex * bey + cey * bex);
+        let ev = EDGE_GAMMA * (aex * cey + aey * cex);
+        let ew = EDGE_GAMMA * (bex * aey + bey * aex);
+        // Certainly outside (one edge function surely negative, another surely positive)?
+        let negative = u < -eu || v < -ev || w < -ew;
+        let positive = u > eu || v > ev || w > ew;
+        if negative && positive {
             return None;
+        }
+        // Any sign in doubt: decide in f64.
+        if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
+            return self.intersect_f64(v0, v1, v2, tmin, tmax);
         }
         let det = u + v + w;
         if det == 0.0 {
@@ -231,5 +256,34 @@ impl WatertightRay {
             return None;
         }
         Some((t, v * rcp_det, w * rcp_det))
+    }
+
+    /// The test in f64 on the f32 inputs, for rays near an edge: the edge
+    /// functions as triple products `d · (P × Q)` of the translated vertices,
+    /// whose signs are those of the exact edge functions (times `|dir[kz]|`)
+    /// unless the ray passes within about 2^-50 of the edge.
+    fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
+        let a = v0.as_dvec3() - o;
+        let b = v1.as_dvec3() - o;
+        let c = v2.as_dvec3() - o;
+        // u for the edge v1-v2, v for v2-v0, w for v0-v1.
+        let u = triple(d, c, b);
+        let v = triple(d, a, c);
+        let w = triple(d, b, a);
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let kz = self.kz;
+        let t_scaled = u * a[kz] + v * b[kz] + w * c[kz];
+        let t = (t_scaled / (det * d[kz])) as f32;
+        if !(t >= tmin && t <= tmax) {
+            return None;
+        }
+        Some((t, (v / det) as f32, (w / det) as f32))
     }
 }
