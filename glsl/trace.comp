@@ -55,6 +55,9 @@ layout(push_constant) uniform Push { TraceParams params; };
 #include "packet_stack.glsl"
 #include "packet_short_stack.glsl"
 
+const float FLT_MIN_NORMAL = 1.17549435e-38;
+const float FLT_MAX = 3.40282347e38;
+
 bool ray_is_valid(Ray ray) {
     bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
     bool dir_ok = !any(isnan(ray.dir)) && any(notEqual(ray.dir, vec3(0.0)));
@@ -81,14 +84,20 @@ void main() {
     best.v = 0.0;
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
 
+    // Denormal direction components count as zeros of the same sign (as on GPUs
+    // that flush them; the CPU twins and the exact reference do the same).
+    vec3 signed_zero = uintBitsToFloat(floatBitsToUint(ray.dir) & uvec3(0x80000000u));
+    ray.dir = mix(ray.dir, signed_zero, lessThan(abs(ray.dir), vec3(FLT_MIN_NORMAL)));
     bool valid = ray_is_valid(ray);
     TraceRay r;
     r.origin = ray.origin;
     r.dir = ray.dir;
-    r.inv_dir = 1.0 / ray.dir;
+    // Clamped so that a plane through the origin gives t = 0, never 0 * inf = NaN.
+    r.inv_dir = clamp(1.0 / ray.dir, vec3(-FLT_MAX), vec3(FLT_MAX));
     r.tmin = ray.tmin;
     r.tmax = ray.tmax;
     r.wr = watertight_ray(ray.origin, ray.dir);
+    r.wr.ray_tmax = ray.tmax;
     float t0 = 0.0, t1 = 0.0;
     bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
     if (!valid) best.prim_id = PRIM_INVALID;

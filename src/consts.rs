@@ -13,6 +13,11 @@ pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
 /// `2^-EDGE_GAMMA_LOG2` times the magnitude of its terms (twice the worst case of
 /// about 12 roundings of 2^-24); within it the test is redone in f64.
 pub const EDGE_GAMMA_LOG2: u32 = 19;
+/// The traversals' split decisions and early exits are widened by
+/// `2^-TRAVERSAL_EPS_LOG2` relative (about 8 f32 ulps, more than the rounding of
+/// two ray/plane distances), so that rounding never skips a cell the ray enters
+/// (conservative traversal in the spirit of Ize 2013).
+pub const TRAVERSAL_EPS_LOG2: u32 = 20;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;
 /// `ropes` entry of a face on the scene boundary.
@@ -88,6 +93,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAX_TRAVERSAL_STEPS", MAX_TRAVERSAL_STEPS),
     ("MAX_SHORT_STACK", MAX_SHORT_STACK),
     ("EDGE_GAMMA_LOG2", EDGE_GAMMA_LOG2),
+    ("TRAVERSAL_EPS_LOG2", TRAVERSAL_EPS_LOG2),
     ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),

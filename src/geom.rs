@@ -2,7 +2,7 @@
 //! boxes, rays, hits and the watertight ray/triangle test.
 
 use bytemuck::{Pod, Zeroable};
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 
 /// An axis-aligned box. The empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -99,11 +99,19 @@ impl Ray {
         Ray { origin: origin.into(), tmin, dir: dir.into(), tmax }
     }
 
+    /// The direction as every tracer takes it: components smaller in magnitude
+    /// than `f32::MIN_POSITIVE` (denormals) become a zero of the same sign, as on
+    /// GPUs that flush denormals. The CPU twins and the exact reference use it too.
+    pub fn traced_dir(&self) -> Vec3 {
+        Vec3::from(self.dir).to_array().map(|d| if d.abs() < f32::MIN_POSITIVE { d * 0.0 } else { d }).into()
+    }
+
     /// A ray is valid when its origin is finite, its direction has no NaN and is
-    /// not zero, and its bounds are not NaN. Invalid rays get `PRIM_INVALID`.
+    /// not zero (after [`Ray::traced_dir`]), and its bounds are not NaN. Invalid
+    /// rays get `PRIM_INVALID`.
     pub fn is_valid(&self) -> bool {
         let o = Vec3::from(self.origin);
-        let d = Vec3::from(self.dir);
+        let d = self.traced_dir();
         o.is_finite() && !d.is_nan() && d != Vec3::ZERO && !self.tmin.is_nan() && !self.tmax.is_nan()
     }
 }
@@ -163,19 +171,26 @@ pub struct WatertightRay {
     pub origin: Vec3,
     /// Ray direction, for the f64 fallback near edges.
     pub dir: Vec3,
+    /// The ray's own `tmax` (the `tmax` argument of [`WatertightRay::intersect`]
+    /// may be the closest hit so far): the f64 decision near the ray's end uses
+    /// it, so a triangle's answer never depends on what was tested before it.
+    /// `+inf` from [`WatertightRay::new`]; set it with [`WatertightRay::with_tmax`].
+    pub ray_tmax: f32,
 }
 
 /// The bound on an f32 edge function's error, relative to the magnitude of its
 /// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
 pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
 
-/// `d · (p × q)` in f64, in a fixed order (exact negation when `p` and `q` swap).
+/// `a·b − c·d` in f64 with Kahan's FMA algorithm: within 2 ulps, so its sign
+/// is exact (and it is 0 exactly when `a·b == c·d`). Twin of
+/// `diff_of_products` in `glsl/shared/triangle.glsl`.
 #[inline]
-fn triple(d: DVec3, p: DVec3, q: DVec3) -> f64 {
-    let x = p.y * q.z - p.z * q.y;
-    let y = p.z * q.x - p.x * q.z;
-    let z = p.x * q.y - p.y * q.x;
-    d.x * x + d.y * y + d.z * z
+fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
+    let p = c * d;
+    let err = c.mul_add(d, -p);
+    let f = a.mul_add(b, -p);
+    f - err
 }
 
 impl WatertightRay {
@@ -197,7 +212,12 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin, dir }
+        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin, dir, ray_tmax: f32::INFINITY }
+    }
+
+    /// The same constants for a ray ending at `tmax`.
+    pub fn with_tmax(self, tmax: f32) -> Self {
+        WatertightRay { ray_tmax: tmax, ..self }
     }
 
     /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
@@ -250,6 +270,17 @@ impl WatertightRay {
         let bz = self.sz * b[kz];
         let cz = self.sz * c[kz];
         let t_scaled = u * az + v * bz + w * cz;
+        // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
+        // ending on a vertex): decide in f64 which side of the bound it lies on.
+        let t_err = EDGE_GAMMA * ((u * az).abs() + (v * bz).abs() + (w * cz).abs());
+        let at_tmin = t_scaled - tmin * det;
+        let at_tmax = t_scaled - self.ray_tmax * det;
+        let near_tmin = !tmin.is_infinite() && at_tmin.abs() <= t_err + EDGE_GAMMA * (tmin * det).abs();
+        let near_tmax =
+            !self.ray_tmax.is_infinite() && at_tmax.abs() <= t_err + EDGE_GAMMA * (self.ray_tmax * det).abs();
+        if near_tmin || near_tmax {
+            return self.intersect_f64(v0, v1, v2, tmin, tmax);
+        }
         let rcp_det = 1.0 / det;
         let t = t_scaled * rcp_det;
         if !(t >= tmin && t <= tmax) {
@@ -258,19 +289,32 @@ impl WatertightRay {
         Some((t, v * rcp_det, w * rcp_det))
     }
 
-    /// The test in f64 on the f32 inputs, for rays near an edge: the edge
-    /// functions as triple products `d · (P × Q)` of the translated vertices,
-    /// whose signs are those of the exact edge functions (times `|dir[kz]|`)
-    /// unless the ray passes within about 2^-50 of the edge.
+    /// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the
+    /// ray's bounds: the vertices sheared as in the f32 test but scaled by
+    /// `|dir[kz]|` instead of divided by `dir[kz]`, so each vertex's 2D
+    /// coordinates are the same for every triangle sharing it, and 2D edge
+    /// functions with exact signs ([`diff_of_products`]): the triangles around an
+    /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
+    /// of them, never none.
     fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
         let a = v0.as_dvec3() - o;
         let b = v1.as_dvec3() - o;
         let c = v2.as_dvec3() - o;
-        // u for the edge v1-v2, v for v2-v0, w for v0-v1.
-        let u = triple(d, c, b);
-        let v = triple(d, a, c);
-        let w = triple(d, b, a);
+        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let dz = d[kz].abs();
+        let sign = if d[kz] < 0.0 { -1.0 } else { 1.0 };
+        let (sx, sy) = (d[kx] * sign, d[ky] * sign);
+        let ax = a[kx] * dz - sx * a[kz];
+        let ay = a[ky] * dz - sy * a[kz];
+        let bx = b[kx] * dz - sx * b[kz];
+        let by = b[ky] * dz - sy * b[kz];
+        let cx = c[kx] * dz - sx * c[kz];
+        let cy = c[ky] * dz - sy * c[kz];
+        // The edge functions times dir[kz]²: u for the edge v1-v2, v for v2-v0, w for v0-v1.
+        let u = diff_of_products(cx, by, cy, bx);
+        let v = diff_of_products(ax, cy, ay, cx);
+        let w = diff_of_products(bx, ay, by, ax);
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
         }
@@ -278,10 +322,11 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let kz = self.kz;
         let t_scaled = u * a[kz] + v * b[kz] + w * c[kz];
-        let t = (t_scaled / (det * d[kz])) as f32;
-        if !(t >= tmin && t <= tmax) {
+        let t64 = t_scaled / (det * d[kz]);
+        // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
+        let t = t64 as f32;
+        if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64 && t <= tmax) {
             return None;
         }
         Some((t, (v / det) as f32, (w / det) as f32))

@@ -132,6 +132,7 @@ pub mod bench;
 /// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).
 pub mod consts;
 pub mod error;
+pub mod exact;
 pub mod geom;
 pub mod gpu;
 pub mod io;
@@ -140,6 +141,7 @@ pub mod raygen;
 pub mod reference;
 pub mod render;
 pub mod scene;
+pub mod stress;
 pub mod sweep;
 pub mod trace;
 

@@ -35,6 +35,8 @@ enum Command {
     Bench(BenchArgs),
     /// Sweep packet variants × packet widths × subgroup sizes: table, CSV and PNG chart.
     Subgroups(SubgroupsArgs),
+    /// Trace hard rays (or a ray file) and compare every answer with the exact reference.
+    Verify(VerifyArgs),
     /// List the Vulkan devices and their subgroup properties.
     Info,
 }
@@ -97,6 +99,37 @@ impl TraversalArgs {
         traversal.validate()?;
         Ok(traversal)
     }
+}
+
+#[derive(clap::Args)]
+struct VerifyArgs {
+    /// OBJ scene file.
+    scene: PathBuf,
+    /// A ray file to verify instead of the stress categories.
+    rays: Option<PathBuf>,
+    #[command(flatten)]
+    traversal: TraversalArgs,
+    /// Verify any-hit (shadow) answers instead of closest hits.
+    #[arg(long)]
+    any_hit: bool,
+    /// Trace with the CPU twin of the traversal instead of the GPU.
+    #[arg(long)]
+    cpu: bool,
+    /// Rays per stress category.
+    #[arg(long, default_value_t = 2000)]
+    count: usize,
+    /// Seed of the stress rays.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Scale the scene by this factor first (e.g. 1e-4 or 1e5).
+    #[arg(long, default_value_t = 1.0)]
+    scale: f32,
+    /// Print up to this many seriously wrong rays per category.
+    #[arg(long, default_value_t = 3)]
+    show: usize,
+    /// Also print up to `--show` disagreeing rays per category that are not serious.
+    #[arg(long)]
+    show_all: bool,
 }
 
 #[derive(clap::Args)]
@@ -651,6 +684,79 @@ fn rays(args: RaysArgs) -> Result<()> {
     Ok(())
 }
 
+fn verify(args: VerifyArgs) -> Result<()> {
+    use kdtrace::stress::{judge_batch, stress_rays, table_header, table_row, Category};
+    let traversal = args.traversal.parse(args.any_hit)?;
+    if !(args.scale.is_finite() && args.scale > 0.0) {
+        bail!("--scale must be a positive finite number");
+    }
+    let mut scene = Scene::load(&args.scene)?;
+    if args.scale != 1.0 {
+        for tri in scene.triangles.iter_mut() {
+            *tri = tri.map(|v| v * args.scale);
+        }
+    }
+    let bar = spinner(format!("building kd-tree over {} triangles", scene.triangles.len()));
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    bar.finish_and_clear();
+    let batches: Vec<(String, Vec<kdtrace::Ray>)> = match &args.rays {
+        Some(path) => vec![(path.display().to_string(), kdtrace::io::read_rays(path)?)],
+        None => Category::ALL
+            .iter()
+            .map(|&c| (c.name().to_string(), stress_rays(c, &scene.triangles, &tree, args.count, args.seed)))
+            .filter(|(_, rays)| !rays.is_empty())
+            .collect(),
+    };
+    let mut tracer = if args.cpu {
+        None
+    } else {
+        let ctx = context()?;
+        Some((Tracer::new(&ctx, &tree, &scene.triangles)?, ctx))
+    };
+    let device = tracer.as_ref().map_or("the CPU twin".to_string(), |(_, ctx)| ctx.info.name.clone());
+    println!(
+        "# kdtrace verify {} (scale {}): {} {} on {}, against the exact reference\n",
+        args.scene.display(),
+        args.scale,
+        traversal.variant.name(),
+        if args.any_hit { "any-hit" } else { "closest hit" },
+        device
+    );
+    println!("{}", table_header());
+    let (mut total, mut serious) = (0usize, 0usize);
+    let mut examples = Vec::new();
+    for (label, rays) in &batches {
+        let hits = match tracer.as_mut() {
+            Some((tracer, _)) => tracer.trace(rays, &TraceOptions { traversal, counters: false })?.hits,
+            None => {
+                let scene_ref = kdtrace::kdtree::traverse::SceneRef::new(&tree, &scene.triangles);
+                let links = traversal
+                    .variant
+                    .uses_links()
+                    .then(|| kdtrace::kdtree::links::TreeLinks::new(&tree.nodes, tree.bounds));
+                let scene_ref = match &links {
+                    Some(l) => scene_ref.with_links(l),
+                    None => scene_ref,
+                };
+                rays.iter().map(|r| kdtrace::kdtree::traverse::trace_ray(&scene_ref, r, traversal).0).collect()
+            }
+        };
+        let tally = judge_batch(&scene.triangles, rays, &hits, args.any_hit);
+        println!("{}", table_row(label, &tally));
+        total += tally.rays;
+        serious += tally.serious();
+        examples.extend(tally.serious_examples.iter().take(args.show).map(|e| (label.clone(), *e)));
+        if args.show_all {
+            examples.extend(tally.other_examples.iter().take(args.show).map(|e| (label.clone(), *e)));
+        }
+    }
+    println!("\n{total} rays, {serious} serious errors");
+    for (label, (ray, hit, verdict)) in examples {
+        println!("- {label}: {} ray {ray:?} -> {hit:?}", verdict.name());
+    }
+    Ok(())
+}
+
 fn info() -> Result<()> {
     let devices = list_devices()?;
     if devices.is_empty() {
@@ -679,6 +785,7 @@ fn main() -> Result<()> {
         Command::Rays(a) => rays(a),
         Command::Bench(a) => bench(a),
         Command::Subgroups(a) => subgroups(a),
+        Command::Verify(a) => verify(a),
         Command::Info => info(),
     }
 }

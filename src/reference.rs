@@ -96,7 +96,7 @@ impl RefRay {
             return None;
         }
         let origin = Vec3::from(ray.origin).as_dvec3();
-        let dir = Vec3::from(ray.dir).as_dvec3();
+        let dir = ray.traced_dir().as_dvec3();
         let a = dir.abs();
         let mut kz = 0;
         if a.y > a[kz] {

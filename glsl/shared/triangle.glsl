@@ -8,11 +8,11 @@
 // passing within a few ulps of an edge may hit the wrong one of two neighbours.
 // Each edge function gets an error bound, EDGE_GAMMA times the magnitudes of its
 // two vertices before cancellation (twice the worst case); when any edge function
-// lies within its bound, the whole test is redone in f64 as triple products
-// d . (P x Q) on the unrounded f32 inputs, whose sign is that of the exact edge
-// function (times |d[kz]|) unless the ray passes within ~2^-50 of the edge.
-// Watertightness is kept: a shared edge's f32 sign outside its bound is the exact
-// sign, and both f32 and f64 forms negate exactly when the edge is reversed.
+// lies within its bound, the whole test is redone in f64 on the f32 inputs, whose
+// signs are those of the exact edge functions unless the ray passes within about
+// 2^-50 of the edge. Watertightness is kept: a shared edge's f32 sign outside its
+// bound is the exact sign, both forms negate exactly when the edge is reversed,
+// and the f64 form is an exact 2D orientation test of shared 2D vertices.
 #ifndef TRIANGLE_GLSL
 #define TRIANGLE_GLSL
 
@@ -21,6 +21,7 @@ struct WatertightRay {
     float sx, sy, sz;
     vec3 origin;
     vec3 dir;
+    float ray_tmax;  // the ray's own tmax (the tmax argument of a test is the closest hit so far)
 };
 
 WatertightRay watertight_ray(vec3 origin, vec3 dir) {
@@ -40,6 +41,7 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
     r.sx = sx; r.sy = sy;
     r.origin = origin;
     r.dir = dir;
+    r.ray_tmax = uintBitsToFloat(0x7f800000u);
     return r;
 }
 
@@ -47,16 +49,22 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
 // (EDGE_GAMMA_LOG2 from src/consts.rs).
 const float EDGE_GAMMA = 1.0 / float(1u << EDGE_GAMMA_LOG2);
 
-// d . (p x q) in f64, in a fixed order (exact negation when p and q swap).
-double triple(dvec3 d, dvec3 p, dvec3 q) {
-    precise double x = p.y * q.z - p.z * q.y;
-    precise double y = p.z * q.x - p.x * q.z;
-    precise double z = p.x * q.y - p.y * q.x;
-    precise double s = d.x * x + d.y * y + d.z * z;
-    return s;
+// a*b - c*d in f64 with Kahan's FMA algorithm: within 2 ulps, so its sign is
+// exact (and it is 0 exactly when a*b == c*d).
+double diff_of_products(double a, double b, double c, double d) {
+    precise double p = c * d;
+    precise double err = fma(c, d, -p);
+    precise double f = fma(a, b, -p);
+    precise double r = f - err;
+    return r;
 }
 
-// The test in f64 on the f32 inputs, for rays near an edge (see the top).
+// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the
+// ray's bounds (see the top). The vertices are sheared as in the f32 test but
+// scaled by |d[kz]| instead of divided by d[kz]: each vertex's 2D coordinates are
+// the same for every triangle sharing it, and the 2D edge functions have exact
+// signs, so the triangles around an edge or vertex tile the plane exactly: a ray
+// through a vertex hits one of them, never none.
 bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
                             out float t_out, out float u_out, out float v_out) {
     dvec3 o = dvec3(r.origin);
@@ -64,18 +72,29 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise dvec3 a = dvec3(v0) - o;
     precise dvec3 b = dvec3(v1) - o;
     precise dvec3 c = dvec3(v2) - o;
-    // The edge functions times |d[kz]|: u for the edge v1-v2, v for v2-v0, w for v0-v1.
-    double u = triple(d, c, b);
-    double v = triple(d, a, c);
-    double w = triple(d, b, a);
+    uint kx = r.kx, ky = r.ky, kz = r.kz;
+    double dz = abs(d[kz]);
+    double sign = d[kz] < 0.0 ? -1.0 : 1.0;
+    double sx = d[kx] * sign;
+    double sy = d[ky] * sign;
+    precise double ax = a[kx] * dz - sx * a[kz];
+    precise double ay = a[ky] * dz - sy * a[kz];
+    precise double bx = b[kx] * dz - sx * b[kz];
+    precise double by = b[ky] * dz - sy * b[kz];
+    precise double cx = c[kx] * dz - sx * c[kz];
+    precise double cy = c[ky] * dz - sy * c[kz];
+    // The edge functions times d[kz]^2: u for the edge v1-v2, v for v2-v0, w for v0-v1.
+    double u = diff_of_products(cx, by, cy, bx);
+    double v = diff_of_products(ax, cy, ay, cx);
+    double w = diff_of_products(bx, ay, by, ax);
     if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return false;
     precise double det = u + v + w;
     if (det == 0.0) return false;
-    uint kz = r.kz;
     precise double t_scaled = u * a[kz] + v * b[kz] + w * c[kz];
     precise double t64 = t_scaled / (det * d[kz]);
+    // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
     float t = float(t64);
-    if (!(t >= tmin && t <= tmax)) return false;
+    if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax) && t <= tmax)) return false;
     t_out = t;
     precise double bu = v / det;
     precise double bv = w / det;
@@ -85,6 +104,9 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
 }
 
 // Returns true and (t, u, v) when the ray hits the triangle at tmin <= t <= tmax.
+// `tmin` must be the ray's own; `tmax` may be the closest hit so far (the f64
+// decision near the ray's end uses `r.ray_tmax`, so a triangle's answer never
+// depends on what was tested before it).
 // Edges and vertices are hits; a ray in the triangle's plane misses.
 bool intersect_triangle(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
                         out float t_out, out float u_out, out float v_out) {
@@ -126,6 +148,16 @@ bool intersect_triangle(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, 
     precise float bz = r.sz * b[r.kz];
     precise float cz = r.sz * c[r.kz];
     precise float t_scaled = u * az + v * bz + w * cz;
+    // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
+    // ending on a vertex): decide in f64 which side of the bound it lies on.
+    precise float t_err = EDGE_GAMMA * (abs(u * az) + abs(v * bz) + abs(w * cz));
+    precise float at_tmin = t_scaled - tmin * det;
+    precise float at_tmax = t_scaled - r.ray_tmax * det;
+    bool near_tmin = !isinf(tmin) && abs(at_tmin) <= t_err + EDGE_GAMMA * abs(tmin * det);
+    bool near_tmax = !isinf(r.ray_tmax) && abs(at_tmax) <= t_err + EDGE_GAMMA * abs(r.ray_tmax * det);
+    if (near_tmin || near_tmax) {
+        return intersect_triangle_f64(r, v0, v1, v2, tmin, tmax, t_out, u_out, v_out);
+    }
     precise float rcp_det = 1.0 / det;
     precise float t = t_scaled * rcp_det;
     if (!(t >= tmin && t <= tmax)) return false;

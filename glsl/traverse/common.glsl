@@ -59,6 +59,34 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
     return t0 <= t1;
 }
 
+// Relative widening of the split decisions and early exits (src/consts.rs).
+const float T_EPS = 1.0 / float(1u << TRAVERSAL_EPS_LOG2);
+
+// The start of the segment after a restart: the exit of the last leaf or, when
+// rounding put that exit at or before the previous restart point (a cell the ray
+// only grazes), the next float after that point. The restart point always moves
+// forward, so restarts end even though near-ties at t0 are followed (below).
+float restart_point(float t_exit, float t_prev) {
+    if (t_exit > t_prev) return t_exit;
+    if (t_prev == 0.0) return uintBitsToFloat(0x00800000u);
+    uint bits = floatBitsToUint(t_prev);
+    return uintBitsToFloat(t_prev > 0.0 ? bits + 1u : bits - 1u);
+}
+
+// The plane a segment ended at, for the tie rule below: (axis, split bits) of a
+// split plane, or NO_PLANE (no tie rule: the first descent, the stacks), or
+// ANY_PLANE (every tie at t0 goes far: restarts whose plane is unknown, and the
+// packet restarts, which keep none).
+const uvec2 NO_PLANE = uvec2(3u, 0u);
+const uvec2 ANY_PLANE = uvec2(4u, 0u);
+// EXACT_PLANE: the first descent of `backtrack` and `ropes`, whose climbs and
+// rope hops need the leaf to hold the point at t0: no near child behind t0.
+const uvec2 EXACT_PLANE = uvec2(5u, 0u);
+
+uvec2 node_plane(uvec2 n) {
+    return uvec2(node_axis(n), n.x);
+}
+
 // Which children of an interior node the segment [t0, t1] needs.
 // `near` is the child the ray is in for t < t_split (chosen by the direction's
 // sign bit, so -0.0 and origins on the plane are handled without ties).
@@ -67,7 +95,7 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
 #define VISIT_BOTH 2u
 #define VISIT_BOTH_SAME 3u   // ray lies in the split plane: both children, same interval
 
-uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, bool ties_go_far,
+uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 exit_plane,
                      out uint near, out uint far, out float t_split) {
     uint axis = node_axis(n);
     float split = node_split(n);
@@ -81,8 +109,32 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, bool ti
     precise float ts = (split - o) * r.inv_dir[axis];
     t_split = ts;
     if (d == 0.0 && o == split) return VISIT_BOTH_SAME;
-    if (ts > t1) return VISIT_NEAR;
-    if (ts < t0 || (ties_go_far && ts == t0)) return VISIT_FAR;
+    // Conservative: one child only when the plane lies beyond the segment by more
+    // than rounding (Ize 2013 in spirit). After a restart (t0 = a leaf exit) the
+    // near side of a plane is skipped when the plane lies before t0, or at t0 and
+    // it is the plane the last leaf was left through.
+    precise float ts_lo = ts - T_EPS * abs(ts);
+    precise float ts_hi = ts + T_EPS * abs(ts);
+    precise float t1_hi = t1 + T_EPS * abs(t1);
+    precise float t0_lo = t0 - T_EPS * abs(t0);
+    if (ts_lo > t1_hi) return VISIT_NEAR;
+    bool far_only;
+    if (exit_plane.x == NO_PLANE.x) {
+        far_only = ts_hi < t0_lo;
+    } else if (exit_plane.x == ANY_PLANE.x) {
+        far_only = ts <= t0;
+    } else if (exit_plane.x == EXACT_PLANE.x) {
+        far_only = ts < t0;
+    } else {
+        // A plane behind t0 is taken as passed (restarts must progress); a tie at
+        // t0 with another plane is followed into the near child with an empty
+        // segment there, and the next restart steps past it.
+        far_only = ts < t0 || (ts == t0 && exit_plane.x == axis && exit_plane.y == n.x);
+    }
+    if (far_only) return VISIT_FAR;
+    // Both: near gets [t0, ts], far [ts, t1], with ts kept inside the segment (a
+    // plane just outside it by rounding gives one child an empty segment there).
+    t_split = min(max(ts, t0), t1);
     return VISIT_BOTH;
 }
 

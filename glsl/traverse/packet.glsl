@@ -39,7 +39,7 @@ struct LaneSplit {
     float below_t0, below_t1, above_t0, above_t1;
 };
 
-LaneSplit lane_split(bool lane_on, TraceRay r, uint node, uvec2 n, float t0, float t1, bool ties_go_far) {
+LaneSplit lane_split(bool lane_on, TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 exit_plane) {
     LaneSplit s;
     s.below = false;
     s.above = false;
@@ -49,7 +49,7 @@ LaneSplit lane_split(bool lane_on, TraceRay r, uint node, uvec2 n, float t0, flo
     if (!lane_on) return s;
     uint near, far;
     float ts;
-    uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+    uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
     s.below_first = near == node + 1u;
     bool need_near = visit != VISIT_FAR;
     bool need_far = visit != VISIT_NEAR;

@@ -22,7 +22,8 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
     float t0 = t_start;
     float t1 = t1_scene;
     float t_done = t_start;    // exit of the last leaf this lane finished
-    bool ties_go_far = false;
+    float t0_restart = t_start;  // where this lane's segment started at the last restart
+    uvec2 exit_plane = NO_PLANE;
     bool lane_on = alive;
     bool complete = true;
     if (!packet_any(lane_on, mask)) return true;
@@ -31,7 +32,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
         uvec2 n = load_node(node);
         if (lane_on) c.nodes += 1u;
         if (!node_is_leaf(n)) {
-            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, ties_go_far);
+            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, exit_plane);
             // A lane's first child is its near one when it needs it, else the only one.
             bool wants_below = s.below && (s.below_first || !s.above);
             bool wants_above = s.above && !wants_below;
@@ -95,10 +96,12 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
         node = restart_node;
         push_down = use_push_down;
         lane_on = alive;
-        t0 = t_done;
+        t0 = restart_point(t_done, t0_restart);
+        if (alive) t0_restart = t0;
+        t_done = t0;
         t1 = min(t1_scene, best.t);
         if (alive) {
-            ties_go_far = true;
+            exit_plane = ANY_PLANE;
             c.restarts += 1u;
         }
     }

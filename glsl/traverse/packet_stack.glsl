@@ -30,7 +30,7 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Hit be
         uvec2 n = load_node(node);
         if (lane_on) c.nodes += 1u;
         if (!node_is_leaf(n)) {
-            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, false);
+            LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, NO_PLANE);
             bool any_below = packet_any(s.below, mask);
             bool any_above = packet_any(s.above, mask);
             uint below = node + 1u;

@@ -9,7 +9,9 @@
 bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
     uint node = 0u;
     float t1 = t1_scene;
-    bool ties_go_far = false;
+    float t0_restart = t0;  // where the segment started at the last restart
+    uvec2 exit_plane = NO_PLANE;  // the plane the last leaf was left through
+    uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
     uint restart_node = 0u;
     bool push_down = true;
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
@@ -17,7 +19,7 @@ bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         if (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_NEAR) {
@@ -25,6 +27,7 @@ bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             } else if (visit == VISIT_BOTH) {
                 node = near;
                 t1 = ts;
+                t1_plane = node_plane(n);
                 push_down = false;
             } else {
                 node = near;
@@ -36,11 +39,13 @@ bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = min(t1_scene, best.t);
         node = restart_node;
         push_down = true;
-        ties_go_far = true;
+        exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
+        t1_plane = NO_PLANE;
         c.restarts += 1u;
     }
     return false;

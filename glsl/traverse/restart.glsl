@@ -9,18 +9,21 @@
 bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
     uint node = 0u;
     float t1 = t1_scene;
-    bool ties_go_far = false;
+    float t0_restart = t0;  // where the segment started at the last restart
+    uvec2 exit_plane = NO_PLANE;  // the plane the last leaf was left through
+    uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
         uvec2 n = fetch_node(node, c);
         if (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
                 node = near;
                 t1 = ts;
+                t1_plane = node_plane(n);
             } else {
                 // VISIT_NEAR, or a ray inside the split plane (only one side can
                 // be followed without a stack: the near one).
@@ -32,10 +35,12 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout T
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
         // Restart from the root behind this leaf.
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = min(t1_scene, best.t);
         node = 0u;
-        ties_go_far = true;
+        exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
+        t1_plane = NO_PLANE;
         c.restarts += 1u;
     }
     return false;

@@ -19,7 +19,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, ties_go_far ? ANY_PLANE : EXACT_PLANE, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {

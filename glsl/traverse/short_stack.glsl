@@ -11,11 +11,14 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     uint stack_node[STACK_SIZE];
     float stack_t0[STACK_SIZE];
     float stack_t1[STACK_SIZE];
+    uvec2 stack_plane[STACK_SIZE];  // the plane each entry's segment ends at
     uint head = 0u;   // next slot to write
     uint count = 0u;
     uint node = 0u;
     float t1 = t1_scene;
-    bool ties_go_far = false;
+    float t0_restart = t0;  // where the segment started at the last restart
+    uvec2 exit_plane = NO_PLANE;  // the plane the last leaf was left through
+    uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
     uint restart_node = 0u;
     bool push_down = use_push_down;
     for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
@@ -23,7 +26,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         if (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_NEAR) {
@@ -38,8 +41,12 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 stack_node[head] = far;
                 stack_t0[head] = visit == VISIT_BOTH ? ts : t0;
                 stack_t1[head] = t1;
+                stack_plane[head] = t1_plane;
                 head = (head + 1u) % STACK_SIZE;
-                if (visit == VISIT_BOTH) t1 = ts;
+                if (visit == VISIT_BOTH) {
+                    t1 = ts;
+                    t1_plane = node_plane(n);
+                }
                 node = near;
                 push_down = false;
             }
@@ -55,14 +62,17 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             node = stack_node[head];
             t0 = stack_t0[head];
             t1 = stack_t1[head];
+            t1_plane = stack_plane[head];
             continue;
         }
         if (t1 >= t1_scene) return true;
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = min(t1_scene, best.t);
         node = restart_node;
         push_down = use_push_down;
-        ties_go_far = true;
+        exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
+        t1_plane = NO_PLANE;
         c.restarts += 1u;
     }
     return false;

@@ -26,7 +26,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
         while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, false, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
             if (visit == VISIT_NEAR) {
                 node = near;
             } else if (visit == VISIT_FAR) {

@@ -235,12 +235,13 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         best.prim_id = PRIM_INVALID;
     } else {
         let origin = Vec3::from(ray.origin);
-        let dir = Vec3::from(ray.dir);
+        let dir = ray.traced_dir();
         let r = TraceRay {
-            wr: WatertightRay::new(origin, dir),
+            wr: WatertightRay::new(origin, dir).with_tmax(ray.tmax),
             origin,
             dir,
-            inv_dir: Vec3::ONE / dir,
+            // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
+            inv_dir: (Vec3::ONE / dir).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX)),
             tmin: ray.tmin,
             tmax: ray.tmax,
             any_hit: traversal.any_hit,
@@ -326,6 +327,23 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
     (t0 <= t1).then_some((t0, t1))
 }
 
+/// Twin of `restart_point` in common.glsl: the start of the segment after a
+/// restart, the last leaf's exit or, when rounding put it at or before the
+/// previous restart point, the next float after that point (progress).
+fn restart_point(t_exit: f32, t_prev: f32) -> f32 {
+    if t_exit > t_prev {
+        return t_exit;
+    }
+    if t_prev == 0.0 {
+        return f32::MIN_POSITIVE;
+    }
+    let bits = t_prev.to_bits();
+    f32::from_bits(if t_prev > 0.0 { bits + 1 } else { bits - 1 })
+}
+
+/// Relative widening of the split decisions (`T_EPS` in common.glsl).
+const T_EPS: f32 = 1.0 / (1u32 << crate::consts::TRAVERSAL_EPS_LOG2) as f32;
+
 // GLSL's min(x, y) is `y < x ? y : x` and max(x, y) is `x < y ? y : x`.
 fn glsl_min(x: f32, y: f32) -> f32 {
     if y < x {
@@ -343,8 +361,33 @@ fn glsl_max(x: f32, y: f32) -> f32 {
     }
 }
 
+/// The plane a segment ended at, for the tie rule of [`decide_children`] (the
+/// `uvec2` planes of common.glsl): none (first descent, stacks: widened rule
+/// only), any (after a restart whose plane is unknown, and the packet kernels:
+/// every tie at t0 goes far), exact (the first descent of backtrack and ropes:
+/// no near child behind t0), or (axis, split bits).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ExitPlane {
+    None,
+    Any,
+    Exact,
+    Plane(usize, u32),
+}
+
+/// The split plane of an interior node.
+fn node_plane(n: KdNode) -> ExitPlane {
+    ExitPlane::Plane(n.axis(), n.split().to_bits())
+}
+
 /// Twin of `decide_children` in common.glsl: (visit, near, far, t_split).
-fn decide_children(r: &TraceRay, index: u32, n: KdNode, t0: f32, t1: f32, ties_go_far: bool) -> (Visit, u32, u32, f32) {
+fn decide_children(
+    r: &TraceRay,
+    index: u32,
+    n: KdNode,
+    t0: f32,
+    t1: f32,
+    exit_plane: ExitPlane,
+) -> (Visit, u32, u32, f32) {
     let axis = n.axis();
     let split = n.split();
     let o = r.origin[axis];
@@ -353,14 +396,25 @@ fn decide_children(r: &TraceRay, index: u32, n: KdNode, t0: f32, t1: f32, ties_g
     let (below, above) = (index + 1, n.above_child());
     let (near, far) = if below_first { (below, above) } else { (above, below) };
     let ts = (split - o) * r.inv_dir[axis];
-    let visit = if d == 0.0 && o == split {
-        Visit::BothSame
-    } else if ts > t1 {
-        Visit::Near
-    } else if ts < t0 || (ties_go_far && ts == t0) {
-        Visit::Far
+    // Conservative (see common.glsl): one child only beyond rounding; after a
+    // restart, planes before t0 are passed, and so is the exit plane at t0.
+    let (ts_lo, ts_hi) = (ts - T_EPS * ts.abs(), ts + T_EPS * ts.abs());
+    let (t0_lo, t1_hi) = (t0 - T_EPS * t0.abs(), t1 + T_EPS * t1.abs());
+    let far_only = match exit_plane {
+        ExitPlane::None => ts_hi < t0_lo,
+        ExitPlane::Any => ts <= t0,
+        ExitPlane::Exact => ts < t0,
+        ExitPlane::Plane(a, bits) => ts < t0 || (ts == t0 && a == axis && bits == split.to_bits()),
+    };
+    let (visit, ts) = if d == 0.0 && o == split {
+        (Visit::BothSame, ts)
+    } else if ts_lo > t1_hi {
+        (Visit::Near, ts)
+    } else if far_only {
+        (Visit::Far, ts)
     } else {
-        Visit::Both
+        // Both, with ts kept inside the segment (see common.glsl).
+        (Visit::Both, glsl_min(glsl_max(ts, t0), t1))
     };
     (visit, near, far, ts)
 }
@@ -390,7 +444,7 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, false);
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
             match visit {
                 Visit::Near => node = near,
                 Visit::Far => node = far,
@@ -421,16 +475,19 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
 fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut ties_go_far = false;
+    let mut t0_restart = t0; // where the segment started at the last restart
+    let mut exit_plane = ExitPlane::None; // the plane the last leaf was left through
+    let mut t1_plane = ExitPlane::None; // the plane the current segment ends at
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
                     node = near;
                     t1 = ts;
+                    t1_plane = node_plane(n);
                 }
                 Visit::Near | Visit::BothSame => node = near,
             }
@@ -439,10 +496,12 @@ fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
         if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = glsl_min(t1_scene, s.best.t);
         node = 0;
-        ties_go_far = true;
+        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
+        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false
@@ -452,19 +511,22 @@ fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
 fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut ties_go_far = false;
+    let mut t0_restart = t0; // where the segment started at the last restart
+    let mut exit_plane = ExitPlane::None; // the plane the last leaf was left through
+    let mut t1_plane = ExitPlane::None; // the plane the current segment ends at
     let mut restart_node = 0u32;
     let mut push_down = true;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             match visit {
                 Visit::Far => node = far,
                 Visit::Near => node = near,
                 Visit::Both => {
                     node = near;
                     t1 = ts;
+                    t1_plane = node_plane(n);
                     push_down = false;
                 }
                 Visit::BothSame => {
@@ -480,11 +542,13 @@ fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
         if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = glsl_min(t1_scene, s.best.t);
         node = restart_node;
         push_down = true;
-        ties_go_far = true;
+        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
+        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false
@@ -493,19 +557,21 @@ fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
 /// Twin of `trace_short_stack` in glsl/traverse/short_stack.glsl: a ring buffer of
 /// `size` entries; a push onto a full stack overwrites the oldest entry.
 fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use_push_down: bool) -> bool {
-    let mut stack = [(0u32, 0f32, 0f32); MAX_SHORT_STACK as usize];
+    let mut stack = [(0u32, 0f32, 0f32, ExitPlane::None); MAX_SHORT_STACK as usize];
     let mut head = 0usize; // next slot to write
     let mut count = 0usize;
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut ties_go_far = false;
+    let mut t0_restart = t0; // where the segment started at the last restart
+    let mut exit_plane = ExitPlane::None; // the plane the last leaf was left through
+    let mut t1_plane = ExitPlane::None; // the plane the current segment ends at
     let mut restart_node = 0u32;
     let mut push_down = use_push_down;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
-            let mut push = |entry: (u32, f32, f32), c: &mut Counters| {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
+            let mut push = |entry: (u32, f32, f32, ExitPlane), c: &mut Counters| {
                 if count == size {
                     c.drops += 1;
                 } else {
@@ -518,13 +584,14 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 Visit::Far => node = far,
                 Visit::Near => node = near,
                 Visit::Both => {
-                    push((far, ts, t1), s.c);
+                    push((far, ts, t1, t1_plane), s.c);
                     node = near;
                     t1 = ts;
+                    t1_plane = node_plane(n);
                     push_down = false;
                 }
                 Visit::BothSame => {
-                    push((far, t0, t1), s.c);
+                    push((far, t0, t1, t1_plane), s.c);
                     node = near;
                     push_down = false;
                 }
@@ -540,17 +607,19 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
         if count > 0 {
             head = (head + size - 1) % size;
             count -= 1;
-            (node, t0, t1) = stack[head];
+            (node, t0, t1, t1_plane) = stack[head];
             continue;
         }
         if t1 >= t1_scene {
             return true;
         }
-        t0 = t1;
+        t0 = restart_point(t1, t0_restart);
+        t0_restart = t0;
         t1 = glsl_min(t1_scene, s.best.t);
         node = restart_node;
         push_down = use_push_down;
-        ties_go_far = true;
+        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
+        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false
@@ -584,7 +653,8 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            let (visit, near, far, ts) =
+                decide_children(s.r, node, n, t0, t1, if ties_go_far { ExitPlane::Any } else { ExitPlane::Exact });
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
@@ -626,7 +696,8 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ties_go_far);
+            let (visit, near, far, ts) =
+                decide_children(s.r, node, n, t0, t1, if ties_go_far { ExitPlane::Any } else { ExitPlane::Exact });
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {

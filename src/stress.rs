@@ -1,0 +1,377 @@
+//! Hard rays for the accuracy stress suite, and the agreement table of a
+//! tracer's answers with the exact reference ([`crate::exact`]). Used by
+//! `kdtrace verify` and `tests/stress.rs`.
+//!
+//! Each [`Category`] aims at one of the numerical pitfalls of kd-tree ray
+//! tracing: rays through vertices and edges, along edges, inside triangle
+//! planes and split planes, leaving surfaces, from very far away, exactly
+//! axis-parallel with signed zeros and denormals, and with direction lengths
+//! from 1e-15 to 1e15. Every batch is seeded and reproducible.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::exact::{closest_exact, judge, judge_any, Exact, Verdict};
+use crate::geom::{Aabb, Hit, Ray};
+use crate::kdtree::build::is_skipped;
+use crate::kdtree::KdTree;
+use crate::raygen::SplitMix64;
+
+/// A kind of hard ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Category {
+    /// Easy rays: uniform origins in the box, uniform directions (the baseline).
+    Random,
+    /// Exactly axis-parallel directions, the other components ±0.0 or ±denormal,
+    /// through points on triangles.
+    AxisParallel,
+    /// Origins exactly on split planes of the tree, half of them with the
+    /// direction inside the plane.
+    SplitPlaneOrigin,
+    /// Origins whose coordinates are vertex coordinates (where split planes lie).
+    VertexCoordOrigin,
+    /// Rays aimed exactly at vertices.
+    ToVertex,
+    /// Rays aimed at points of edges (shared edges mostly).
+    ToEdge,
+    /// Rays along edges, starting before them.
+    AlongEdge,
+    /// Rays inside a triangle's plane.
+    InTrianglePlane,
+    /// Rays inside axis-aligned planes that contain triangles (direction
+    /// component exactly 0 along the axis).
+    AxisPlane,
+    /// Rays leaving a point on a triangle (`tmin = 0`), either side.
+    OnSurface,
+    /// Origins 1e5 scene sizes away, aimed at points on triangles.
+    FarOrigin,
+    /// Rays toward points on triangles with direction lengths 1e-15 … 1e15.
+    DirectionScale,
+}
+
+impl Category {
+    /// Every category, in table order.
+    pub const ALL: [Category; 12] = [
+        Category::Random,
+        Category::AxisParallel,
+        Category::SplitPlaneOrigin,
+        Category::VertexCoordOrigin,
+        Category::ToVertex,
+        Category::ToEdge,
+        Category::AlongEdge,
+        Category::InTrianglePlane,
+        Category::AxisPlane,
+        Category::OnSurface,
+        Category::FarOrigin,
+        Category::DirectionScale,
+    ];
+
+    /// Name for tables and the CLI.
+    pub fn name(self) -> &'static str {
+        match self {
+            Category::Random => "random",
+            Category::AxisParallel => "axis-parallel",
+            Category::SplitPlaneOrigin => "split-plane origin",
+            Category::VertexCoordOrigin => "vertex-coord origin",
+            Category::ToVertex => "to vertex",
+            Category::ToEdge => "to edge",
+            Category::AlongEdge => "along edge",
+            Category::InTrianglePlane => "in triangle plane",
+            Category::AxisPlane => "in axis plane",
+            Category::OnSurface => "on surface",
+            Category::FarOrigin => "far origin",
+            Category::DirectionScale => "direction scale",
+        }
+    }
+}
+
+/// What the generators draw from.
+struct Source<'a> {
+    triangles: &'a [[Vec3; 3]],
+    /// Triangles the tracer can hit (not skipped).
+    live: Vec<u32>,
+    bounds: Aabb,
+    size: f32,
+    rng: SplitMix64,
+}
+
+impl Source<'_> {
+    fn index(&mut self, n: usize) -> usize {
+        (self.rng.next_u64() % n as u64) as usize
+    }
+
+    fn triangle(&mut self) -> [Vec3; 3] {
+        let i = self.index(self.live.len());
+        self.triangles[self.live[i] as usize]
+    }
+
+    fn vertex(&mut self) -> Vec3 {
+        self.triangle()[self.index(3)]
+    }
+
+    /// A uniform point of a random triangle (rounded to f32).
+    fn surface_point(&mut self) -> Vec3 {
+        let [a, b, c] = self.triangle();
+        let (mut s, mut t) = (self.rng.next_f32(), self.rng.next_f32());
+        if s + t > 1.0 {
+            (s, t) = (1.0 - s, 1.0 - t);
+        }
+        a + s * (b - a) + t * (c - a)
+    }
+
+    /// A uniform point of the box grown by 10 % on each side.
+    fn box_point(&mut self) -> Vec3 {
+        let e = self.bounds.extent();
+        let p = Vec3::new(self.rng.next_f32(), self.rng.next_f32(), self.rng.next_f32());
+        self.bounds.min - 0.1 * e + p * 1.2 * e
+    }
+
+    fn sign(&mut self) -> f32 {
+        if self.rng.next_u64() & 1 == 0 {
+            1.0
+        } else {
+            -1.0
+        }
+    }
+}
+
+fn toward(origin: Vec3, target: Vec3) -> Ray {
+    Ray::new(origin, target - origin, 0.0, f32::INFINITY)
+}
+
+/// `count` rays of `category` for the scene (`tree` gives the split planes).
+/// Returns no rays for [`Category::AxisPlane`] when no triangle lies in an axis plane.
+pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, count: usize, seed: u64) -> Vec<Ray> {
+    let live: Vec<u32> = (0..triangles.len() as u32).filter(|&i| !is_skipped(&triangles[i as usize])).collect();
+    if live.is_empty() {
+        return Vec::new();
+    }
+    let bounds = tree.bounds;
+    let size = bounds.extent().max_element().max(f32::MIN_POSITIVE);
+    let mut s = Source { triangles, live, bounds, size, rng: SplitMix64(seed ^ (category as u64) << 32) };
+    let mut splits = Vec::new();
+    if category == Category::SplitPlaneOrigin {
+        tree.for_each_node(|_, node, b, _| {
+            if !node.is_leaf() {
+                splits.push((node.axis(), node.split(), b));
+            }
+        });
+    }
+    let mut planes = Vec::new();
+    if category == Category::AxisPlane {
+        for &i in &s.live {
+            let t = &triangles[i as usize];
+            planes.extend(
+                (0..3).filter(|&axis| t[0][axis] == t[1][axis] && t[1][axis] == t[2][axis]).map(|axis| (axis, i)),
+            );
+        }
+        if planes.is_empty() {
+            return Vec::new();
+        }
+    }
+    (0..count)
+        .map(|_| match category {
+            Category::Random => Ray::new(s.box_point(), s.rng.unit_vector(), 0.0, f32::INFINITY),
+            Category::AxisParallel => {
+                let p = s.surface_point();
+                let axis = s.index(3);
+                let sign = s.sign();
+                let mut origin = p;
+                origin[axis] =
+                    if sign > 0.0 { bounds.min[axis] - 0.1 * s.size } else { bounds.max[axis] + 0.1 * s.size };
+                let mut dir = Vec3::ZERO;
+                dir[axis] = sign * 10f32.powi(s.index(7) as i32 - 3);
+                for other in [(axis + 1) % 3, (axis + 2) % 3] {
+                    dir[other] = match s.index(3) {
+                        0 => 0.0,
+                        1 => -0.0,
+                        _ => s.sign() * f32::from_bits(1 + s.index(1000) as u32),
+                    };
+                }
+                Ray::new(origin, dir, 0.0, f32::INFINITY)
+            }
+            Category::SplitPlaneOrigin => {
+                if splits.is_empty() {
+                    return Ray::new(s.box_point(), s.rng.unit_vector(), 0.0, f32::INFINITY);
+                }
+                let (axis, split, b) = splits[s.index(splits.len())];
+                let e = b.extent();
+                let mut origin = b.min + Vec3::new(s.rng.next_f32(), s.rng.next_f32(), s.rng.next_f32()) * e;
+                origin[axis] = split;
+                if s.rng.next_u64() & 1 == 0 {
+                    toward(origin, s.surface_point())
+                } else {
+                    let mut dir = s.rng.unit_vector();
+                    dir[axis] = if s.rng.next_u64() & 1 == 0 { 0.0 } else { -0.0 };
+                    Ray::new(origin, dir, 0.0, f32::INFINITY)
+                }
+            }
+            Category::VertexCoordOrigin => {
+                let origin = Vec3::new(s.vertex().x, s.vertex().y, s.vertex().z);
+                toward(origin, s.surface_point())
+            }
+            Category::ToVertex => {
+                let origin = s.box_point();
+                toward(origin, s.vertex())
+            }
+            Category::ToEdge => {
+                let [a, b, c] = s.triangle();
+                let (p, q) = [(a, b), (b, c), (c, a)][s.index(3)];
+                let h = if s.rng.next_u64() & 1 == 0 { 0.5 } else { s.rng.next_f32() };
+                let origin = s.box_point();
+                toward(origin, p + h * (q - p))
+            }
+            Category::AlongEdge => {
+                let [a, b, c] = s.triangle();
+                let (p, q) = [(a, b), (b, c), (c, a)][s.index(3)];
+                Ray::new(p - 0.5 * (q - p), q - p, 0.0, f32::INFINITY)
+            }
+            Category::InTrianglePlane => {
+                let [a, b, c] = s.triangle();
+                let plane_point = |s: &mut Source| {
+                    let (u, v) = (s.rng.next_f32() * 2.0 - 0.5, s.rng.next_f32() * 2.0 - 0.5);
+                    a + u * (b - a) + v * (c - a)
+                };
+                let (p, q) = (plane_point(&mut s), plane_point(&mut s));
+                toward(p, q)
+            }
+            Category::AxisPlane => {
+                let (axis, i) = planes[s.index(planes.len())];
+                let tri = triangles[i as usize];
+                let mut origin = s.box_point();
+                origin[axis] = tri[0][axis];
+                let (mut u, mut v) = (s.rng.next_f32(), s.rng.next_f32());
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                let mut target = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+                target[axis] = tri[0][axis];
+                let mut dir = target - origin;
+                dir[axis] = 0.0;
+                Ray::new(origin, dir, 0.0, f32::INFINITY)
+            }
+            Category::OnSurface => {
+                let origin = s.surface_point();
+                Ray::new(origin, s.rng.unit_vector(), 0.0, f32::INFINITY)
+            }
+            Category::FarOrigin => {
+                let origin = bounds.center() + s.rng.unit_vector() * (1e5 * s.size);
+                toward(origin, s.surface_point())
+            }
+            Category::DirectionScale => {
+                let origin = s.box_point();
+                let target = s.surface_point();
+                let scale = 10f32.powi(s.index(31) as i32 - 15);
+                Ray::new(origin, (target - origin) * scale, 0.0, f32::INFINITY)
+            }
+        })
+        .collect()
+}
+
+/// Counts of verdicts over a batch.
+#[derive(Clone, Debug, Default)]
+pub struct Tally {
+    /// Rays judged.
+    pub rays: usize,
+    /// Count per verdict, indexed like [`Verdict::ALL`].
+    pub counts: [usize; Verdict::ALL.len()],
+    /// Largest distance between the tracer's and the exact hit point among
+    /// agreeing hits, relative to the magnitude of the coordinates.
+    pub max_point_error: f64,
+    /// Up to 5 seriously wrong rays, with the tracer's answer.
+    pub serious_examples: Vec<(Ray, Hit, Verdict)>,
+    /// Up to 5 rays that disagree without a serious error, with the tracer's answer.
+    pub other_examples: Vec<(Ray, Hit, Verdict)>,
+}
+
+impl Tally {
+    /// Rays whose answer agrees with the exact one.
+    pub fn agreeing(&self) -> usize {
+        Verdict::ALL.iter().zip(&self.counts).filter(|(v, _)| v.agrees()).map(|(_, n)| n).sum()
+    }
+
+    /// Rays with a serious error.
+    pub fn serious(&self) -> usize {
+        Verdict::ALL.iter().zip(&self.counts).filter(|(v, _)| v.is_serious()).map(|(_, n)| n).sum()
+    }
+
+    /// Fraction of rays that agree (1 for an empty batch).
+    pub fn agreement(&self) -> f64 {
+        if self.rays == 0 {
+            1.0
+        } else {
+            self.agreeing() as f64 / self.rays as f64
+        }
+    }
+
+    /// The count of one verdict.
+    pub fn count(&self, v: Verdict) -> usize {
+        self.counts[Verdict::ALL.iter().position(|&x| x == v).expect("a verdict")]
+    }
+}
+
+/// The exact answers for `rays` (brute force over `triangles`, in parallel).
+pub fn exact_answers(triangles: &[[Vec3; 3]], rays: &[Ray]) -> Vec<Exact> {
+    rays.par_iter().map(|ray| closest_exact(triangles, ray)).collect()
+}
+
+/// Judges a tracer's `hits` for `rays` against the exact reference (brute
+/// force over `triangles`, in parallel). `any_hit`: the hits are any-hit answers.
+pub fn judge_batch(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], any_hit: bool) -> Tally {
+    judge_with(triangles, rays, hits, &exact_answers(triangles, rays), any_hit)
+}
+
+/// [`judge_batch`] with the exact answers computed beforehand ([`exact_answers`]).
+pub fn judge_with(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], exacts: &[Exact], any_hit: bool) -> Tally {
+    assert_eq!(rays.len(), hits.len(), "one hit per ray");
+    assert_eq!(rays.len(), exacts.len(), "one exact answer per ray");
+    let verdicts: Vec<(Verdict, f64)> = rays
+        .par_iter()
+        .zip(hits)
+        .zip(exacts)
+        .map(|((ray, hit), exact)| {
+            let exact = exact.clone();
+            if any_hit {
+                (judge_any(triangles, ray, hit, &exact), 0.0)
+            } else {
+                let (v, err) = judge(triangles, ray, hit, &exact);
+                let o = Vec3::from(ray.origin).as_dvec3();
+                let p = o + hit.t as f64 * Vec3::from(ray.dir).as_dvec3();
+                let scale = o.abs().max_element().max(p.abs().max_element()).max(f64::MIN_POSITIVE);
+                (v, if v.agrees() && err.is_finite() { err / scale } else { 0.0 })
+            }
+        })
+        .collect();
+    let mut tally = Tally { rays: rays.len(), ..Tally::default() };
+    for (i, (v, err)) in verdicts.into_iter().enumerate() {
+        tally.counts[Verdict::ALL.iter().position(|&x| x == v).expect("a verdict")] += 1;
+        tally.max_point_error = tally.max_point_error.max(err);
+        if v.is_serious() && tally.serious_examples.len() < 5 {
+            tally.serious_examples.push((rays[i], hits[i], v));
+        } else if !v.agrees() && !v.is_serious() && tally.other_examples.len() < 5 {
+            tally.other_examples.push((rays[i], hits[i], v));
+        }
+    }
+    tally
+}
+
+/// The header of [`table_row`]'s table (markdown).
+pub fn table_header() -> String {
+    let mut s = String::from("| category | rays | agree | ");
+    s += &Verdict::ALL.map(|v| v.name()).join(" | ");
+    s += " | max point err |\n|---|---|---|";
+    s += &"---|".repeat(Verdict::ALL.len() + 1);
+    s
+}
+
+/// One row of the agreement table.
+pub fn table_row(label: &str, t: &Tally) -> String {
+    let counts: Vec<String> = t.counts.iter().map(|n| n.to_string()).collect();
+    format!(
+        "| {label} | {} | {:.2}% | {} | {:.1e} |",
+        t.rays,
+        100.0 * t.agreement(),
+        counts.join(" | "),
+        t.max_point_error
+    )
+}

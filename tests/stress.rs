@@ -1,0 +1,299 @@
+//! The accuracy stress suite (issue 7) on lavapipe: hard rays of every
+//! category (`kdtrace::stress`) over the shared scenes, unscaled and scaled,
+//! through every traversal variant on the GPU and the CPU twin, judged against
+//! the exact reference (`kdtrace::exact`); and watertightness on closed meshes.
+//!
+//! Asserted: no serious error anywhere (a missed interior hit, a hit far from
+//! its triangle, an incomplete or wrongly flagged answer); where a variant's
+//! primitive differs from the stack's and neither is in the exact tie set,
+//! neither answer is serious; agreement with the exact answer of at least
+//! `OVERALL_FLOOR` over all categories and `CATEGORY_FLOOR` in each (some
+//! categories do not reach 99 % yet: see docs/ACCURACY.md). Watertightness: no
+//! escape with the full stack, and no more than the measured rates for the
+//! others. The tables are printed (`--nocapture`).
+
+mod common;
+
+use common::{assert_validation_clean, context, scene_path};
+use glam::Vec3;
+use kdtrace::exact::{judge, Exact};
+use kdtrace::kdtree::links::TreeLinks;
+use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
+use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::raygen::SplitMix64;
+use kdtrace::scene::Scene;
+use kdtrace::stress::{exact_answers, judge_with, stress_rays, table_header, table_row, Category, Tally};
+use kdtrace::trace::{TraceOptions, Tracer};
+use kdtrace::{Hit, Ray};
+
+/// Rays per category and scene.
+const RAYS: usize = 600;
+/// Lowest agreement any category may have (see the module docs).
+const CATEGORY_FLOOR: f64 = 0.85;
+/// Lowest agreement over all categories of one scene and traversal.
+const OVERALL_FLOOR: f64 = 0.97;
+
+/// One category's rays, their exact answers and the stack's hits.
+type Batch = (Category, Vec<Ray>, Vec<Exact>, Vec<Hit>);
+
+fn traversals() -> Vec<Traversal> {
+    let mut all: Vec<Traversal> = Variant::ALL.iter().map(|&v| Traversal::closest(v)).collect();
+    all.push(Traversal { stack_size: 1, ..Traversal::closest(Variant::PushDownShortStack) });
+    all
+}
+
+fn cpu_hits(tree: &KdTree, triangles: &[[Vec3; 3]], links: &TreeLinks, rays: &[Ray], traversal: Traversal) -> Vec<Hit> {
+    let scene = SceneRef::new(tree, triangles).with_links(links);
+    rays.iter().map(|r| trace_ray(&scene, r, traversal).0).collect()
+}
+
+/// A hit of a tracer must name the stack's primitive, or one of the exact tie set.
+fn same_primitive(a: &Hit, b: &Hit, exact: &Exact) -> bool {
+    a.prim_id == b.prim_id
+        || matches!(exact, Exact::Hit { ties, .. } if ties.contains(&a.prim_id) && ties.contains(&b.prim_id))
+}
+
+fn stress_scene(name: &str, scale: f32) {
+    let mut scene = Scene::load(&scene_path(name)).unwrap();
+    for tri in scene.triangles.iter_mut() {
+        *tri = tri.map(|v| v * scale);
+    }
+    let triangles = &scene.triangles;
+    let tree = KdTree::build(triangles, &BuildConfig::default());
+    let links = TreeLinks::new(&tree.nodes, tree.bounds);
+    let ctx = context();
+    let mut tracer = Tracer::new(&ctx, &tree, triangles).unwrap();
+    let batches: Vec<Batch> = Category::ALL
+        .iter()
+        .map(|&c| stress_rays(c, triangles, &tree, RAYS, 7))
+        .zip(Category::ALL)
+        .filter(|(r, _)| !r.is_empty())
+        .map(|(rays, c)| {
+            let exacts = exact_answers(triangles, &rays);
+            let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
+            (c, rays, exacts, stack)
+        })
+        .collect();
+    let mut failures = Vec::new();
+    for traversal in traversals() {
+        for gpu in [true, false] {
+            if !gpu && traversal != Traversal::closest(Variant::Stack) && traversal.variant != Variant::Ropes {
+                continue; // the CPU twins equal the GPU bit for bit (tests/gpu_trace.rs)
+            }
+            let label = format!("{name} ×{scale} {} {}", traversal.variant.name(), if gpu { "GPU" } else { "CPU" });
+            println!("\n{label}\n{}", table_header());
+            let mut all = Tally::default();
+            for (category, rays, exacts, stack) in &batches {
+                let hits = if gpu {
+                    tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits
+                } else {
+                    cpu_hits(&tree, triangles, &links, rays, traversal)
+                };
+                let t = judge_with(triangles, rays, &hits, exacts, false);
+                println!("{}", table_row(category.name(), &t));
+                if t.serious() > 0 {
+                    failures.push(format!(
+                        "{label} / {}: {} serious: {:?}",
+                        category.name(),
+                        t.serious(),
+                        t.serious_examples
+                    ));
+                }
+                if t.agreement() < CATEGORY_FLOOR {
+                    failures.push(format!("{label} / {}: agreement {:.4}", category.name(), t.agreement()));
+                }
+                if traversal.variant != Variant::Stack {
+                    // Same primitive as the stack, or both in the exact tie set;
+                    // otherwise both answers must be acceptable (grazing at most).
+                    for (((ray, a), b), exact) in rays.iter().zip(&hits).zip(stack).zip(exacts) {
+                        if !same_primitive(a, b, exact) {
+                            let (va, vb) = (judge(triangles, ray, a, exact).0, judge(triangles, ray, b, exact).0);
+                            if va.is_serious() || vb.is_serious() {
+                                failures.push(format!("{label} / {}: {ray:?}: {a:?} vs stack {b:?}", category.name()));
+                            }
+                        }
+                    }
+                }
+                all.rays += t.rays;
+                for (n, m) in all.counts.iter_mut().zip(t.counts) {
+                    *n += m;
+                }
+            }
+            println!("{}", table_row("all", &all));
+            if all.agreement() < OVERALL_FLOOR {
+                failures.push(format!("{label}: overall agreement {:.4}", all.agreement()));
+            }
+        }
+    }
+    assert_validation_clean(&ctx);
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+}
+
+#[test]
+fn stress_cornell_box() {
+    stress_scene("cornell_box.obj", 1.0);
+}
+
+#[test]
+fn stress_teapot() {
+    stress_scene("teapot.obj", 1.0);
+}
+
+#[test]
+fn stress_scaled_scenes() {
+    stress_scene("teapot.obj", 1e-4);
+    stress_scene("cornell_box.obj", 1e5);
+}
+
+// ---- Watertightness --------------------------------------------------------
+
+/// An icosphere of radius 1 subdivided `levels` times, optionally with every
+/// vertex moved radially by up to `bump` (seeded): closed, consistently wound.
+fn sphere(levels: u32, bump: f32, seed: u64) -> Vec<[Vec3; 3]> {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut verts: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut mid = std::collections::HashMap::new();
+        let mut midpoint = |a: usize, b: usize, verts: &mut Vec<Vec3>| {
+            *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                verts.push(((verts[a] + verts[b]) * 0.5).normalize());
+                verts.len() - 1
+            })
+        };
+        let mut next = Vec::with_capacity(faces.len() * 4);
+        for [a, b, c] in faces {
+            let (ab, bc, ca) = (midpoint(a, b, &mut verts), midpoint(b, c, &mut verts), midpoint(c, a, &mut verts));
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        faces = next;
+    }
+    let mut rng = SplitMix64(seed);
+    for v in verts.iter_mut() {
+        *v *= 1.0 + bump * (rng.next_f32() - 0.5);
+    }
+    faces.iter().map(|f| f.map(|i| verts[i])).collect()
+}
+
+/// Rays from points inside the closed mesh: toward random directions, toward
+/// vertices exactly, toward edge midpoints. Every one must hit.
+fn inside_rays(tris: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = SplitMix64(seed);
+    (0..count)
+        .map(|i| {
+            let origin = rng.unit_vector() * (0.5 * rng.next_f32());
+            let tri = tris[(rng.next_u64() % tris.len() as u64) as usize];
+            let target = match i % 3 {
+                0 => origin + rng.unit_vector(),
+                1 => tri[(rng.next_u64() % 3) as usize],
+                _ => {
+                    let k = (rng.next_u64() % 3) as usize;
+                    (tri[k] + tri[(k + 1) % 3]) * 0.5
+                }
+            };
+            Ray::new(origin, target - origin, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+#[test]
+fn closed_meshes_have_no_holes() {
+    let ctx = context();
+    let meshes = [
+        ("icosphere 3", sphere(3, 0.0, 1)),
+        ("icosphere 5", sphere(5, 0.0, 1)),
+        ("perturbed sphere 4", sphere(4, 0.1, 2)),
+        ("perturbed sphere 6", sphere(6, 0.05, 3)),
+    ];
+    let rays_per_mesh = 1_000_000 / meshes.len() + 1;
+    let mut total = 0usize;
+    let mut failures = Vec::new();
+    for (name, tris) in &meshes {
+        let tree = KdTree::build(tris, &BuildConfig::default());
+        let links = TreeLinks::new(&tree.nodes, tree.bounds);
+        let mut tracer = Tracer::new(&ctx, &tree, tris).unwrap();
+        let rays = inside_rays(tris, rays_per_mesh, name.len() as u64);
+        for traversal in traversals() {
+            let hits = match tracer.trace(&rays, &TraceOptions { traversal, counters: false }) {
+                Ok(result) => result.hits,
+                Err(e) => {
+                    println!("{name}, {}: {e}", traversal.variant.name());
+                    failures.push(format!("{name}, {}: {e}", traversal.variant.name()));
+                    continue;
+                }
+            };
+            let escapes: Vec<usize> = (0..rays.len()).filter(|&i| !hits[i].is_hit()).collect();
+            let label = format!("{}({})", traversal.variant.name(), traversal.stack_size);
+            println!("{name}, {label}: {} of {} rays escaped", escapes.len(), rays.len());
+            // The full stack must be watertight; the others are held to the rates
+            // measured when this test was written (docs/ACCURACY.md), so that a
+            // regression fails. Their escapes are rays through vertices and edges
+            // of cells, which a restart in f32 cannot order.
+            let allowed = if traversal.variant == Variant::Stack {
+                0
+            } else if traversal.variant.uses_short_stack() && traversal.stack_size >= 3 {
+                rays.len() / 10_000
+            } else {
+                rays.len() / 25
+            };
+            if escapes.len() > allowed {
+                failures.push(format!(
+                    "{name}, {label}: {} of {} rays escaped (at most {allowed} allowed), e.g. {:?}",
+                    escapes.len(),
+                    rays.len(),
+                    escapes
+                        .iter()
+                        .take(2)
+                        .map(|&i| (rays[i], hits[i], kdtrace::exact::closest_exact(tris, &rays[i])))
+                        .collect::<Vec<_>>()
+                ));
+            }
+        }
+        // The CPU twin of the stack, on a sample.
+        let sample: Vec<Ray> = rays.iter().step_by(20).copied().collect();
+        let cpu = cpu_hits(&tree, tris, &links, &sample, Traversal::closest(Variant::Stack));
+        assert!(cpu.iter().all(Hit::is_hit), "{name}: the CPU twin lets a ray escape");
+        println!("{name}: {} triangles, {} rays from inside", tris.len(), rays.len());
+        total += rays.len();
+    }
+    assert!(total >= 1_000_000);
+    assert_validation_clean(&ctx);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
