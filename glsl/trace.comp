@@ -13,7 +13,6 @@
 
 #include "ray.glsl"
 #include "kdnode.glsl"
-#include "triangle.glsl"
 
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
@@ -23,6 +22,10 @@ layout(constant_id = 1) const bool COUNTERS = false;
 layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
 layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
 layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
+layout(constant_id = 5) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
+
+#include "triangle.glsl"
+
 
 // Nodes and triangles are uniform texel buffers, not storage buffers: lavapipe
 // (22.x) loads a storage buffer one lane and one 32-bit component at a time, in a

@@ -128,11 +128,14 @@ pub fn markdown_table(rows: &[BenchRow]) -> String {
     );
     let base_nodes = rows.first().map(|r| r.nodes).unwrap_or(1.0);
     for r in rows {
-        let name = if r.traversal.variant.uses_short_stack() {
+        let mut name = if r.traversal.variant.uses_short_stack() {
             format!("{}({})", r.traversal.variant, r.traversal.stack_size)
         } else {
             r.traversal.variant.to_string()
         };
+        if !r.traversal.robust {
+            name += " plain";
+        }
         out.push_str(&format!(
             "| {}{} | {:.2} | {:.1} ({:.1}–{:.1}) | {:.1} | {:+.1}% | {:.2} | {:.1} | {:.2} | {:.2} | {} | {}/{} |\n",
             name,

@@ -176,21 +176,50 @@ pub struct WatertightRay {
     /// it, so a triangle's answer never depends on what was tested before it.
     /// `+inf` from [`WatertightRay::new`]; set it with [`WatertightRay::with_tmax`].
     pub ray_tmax: f32,
+    /// The f64 fallback near edges and bounds (`Traversal::robust`; true from
+    /// [`WatertightRay::new`]). False: the plain test, with the f64 recompute only
+    /// at an edge function of exactly 0.
+    pub robust: bool,
 }
 
 /// The bound on an f32 edge function's error, relative to the magnitude of its
 /// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
 pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
 
-/// `a·b − c·d` in f64 with Kahan's FMA algorithm: within 2 ulps, so its sign
-/// is exact (and it is 0 exactly when `a·b == c·d`). Twin of
-/// `diff_of_products` in `glsl/shared/triangle.glsl`.
+/// The f64 product `a·b` as `p + e` exactly (Dekker 1971, Veltkamp's split; no
+/// FMA, so every IEEE device gives the same bits). Twin of `two_product` in
+/// `glsl/shared/triangle.glsl`.
+#[inline]
+fn two_product(a: f64, b: f64) -> (f64, f64) {
+    let split = |x: f64| {
+        let c = 134_217_729.0 * x;
+        let hi = c - (c - x);
+        (hi, x - hi)
+    };
+    let ((a_hi, a_lo), (b_hi, b_lo)) = (split(a), split(b));
+    let p = a * b;
+    (p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo)
+}
+
+/// `a·b − c·d` in f64 from exact products: 0 exactly when `a·b == c·d`, and of
+/// the exact sign unless the products' rounding errors cancel their difference.
+/// Twin of `diff_of_products` in `glsl/shared/triangle.glsl`.
 #[inline]
 fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
-    let p = c * d;
-    let err = c.mul_add(d, -p);
-    let f = a.mul_add(b, -p);
-    f - err
+    let (p1, e1) = two_product(a, b);
+    let (p2, e2) = two_product(c, d);
+    (p1 - p2) + (e1 - e2)
+}
+
+/// The answer of the f32 watertight test ([`WatertightRay::intersect_f32`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TriTest {
+    /// No hit in `[tmin, tmax]`.
+    Miss,
+    /// A hit: `(t, u, v)`.
+    Hit(f32, f32, f32),
+    /// Rounding could decide it: ask [`WatertightRay::intersect_f64`].
+    Unsure,
 }
 
 impl WatertightRay {
@@ -212,7 +241,18 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        WatertightRay { kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz, origin, dir, ray_tmax: f32::INFINITY }
+        WatertightRay {
+            kx,
+            ky,
+            kz,
+            sx: dir[kx] * sz,
+            sy: dir[ky] * sz,
+            sz,
+            origin,
+            dir,
+            ray_tmax: f32::INFINITY,
+            robust: true,
+        }
     }
 
     /// The same constants for a ray ending at `tmax`.
@@ -222,11 +262,25 @@ impl WatertightRay {
 
     /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
     /// triangle at `tmin <= t <= tmax` (edges and vertices count as hits, both
-    /// faces are hit, a ray in the triangle's plane misses).
-    /// Every operation is an f32 operation in the same order as the shader's, so
-    /// CPU and GPU give the same bits.
+    /// faces are hit, a ray in the triangle's plane misses): the f32 test, and
+    /// the f64 one when the f32 test is unsure. Every operation is the shader's,
+    /// in the same order, so CPU and GPU give the same bits.
     #[inline]
     pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        match self.intersect_f32(v0, v1, v2, tmin, tmax) {
+            TriTest::Hit(t, u, v) => Some((t, u, v)),
+            TriTest::Miss => None,
+            TriTest::Unsure => self.intersect_f64(v0, v1, v2, tmin, tmax),
+        }
+    }
+
+    /// The f32 test (`intersect_triangle_f32` in triangle.glsl): a hit, a miss,
+    /// or unsure when rounding could decide it — an edge function or the
+    /// distance to the ray's bounds within its error bound; then
+    /// [`WatertightRay::intersect_f64`] decides. Whether a pair is unsure does
+    /// not depend on `tmax` (the closest hit so far).
+    #[inline]
+    pub fn intersect_f32(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> TriTest {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
         let a = v0 - self.origin;
         let b = v1 - self.origin;
@@ -242,6 +296,12 @@ impl WatertightRay {
         let u = cx * by - cy * bx;
         let v = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
+        if !self.robust {
+            return match self.intersect_plain([ax, ay, bx, by, cx, cy], [u, v, w], [a[kz], b[kz], c[kz]], tmin, tmax) {
+                Some((t, u, v)) => TriTest::Hit(t, u, v),
+                None => TriTest::Miss,
+            };
+        }
         // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
         let aex = a[kx].abs() + (self.sx * a[kz]).abs();
         let aey = a[ky].abs() + (self.sy * a[kz]).abs();
@@ -256,15 +316,15 @@ impl WatertightRay {
         let negative = u < -eu || v < -ev || w < -ew;
         let positive = u > eu || v > ev || w > ew;
         if negative && positive {
-            return None;
+            return TriTest::Miss;
         }
         // Any sign in doubt: decide in f64.
         if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
-            return self.intersect_f64(v0, v1, v2, tmin, tmax);
+            return TriTest::Unsure;
         }
         let det = u + v + w;
         if det == 0.0 {
-            return None;
+            return TriTest::Miss;
         }
         let az = self.sz * a[kz];
         let bz = self.sz * b[kz];
@@ -279,8 +339,41 @@ impl WatertightRay {
         let near_tmax =
             !self.ray_tmax.is_infinite() && at_tmax.abs() <= t_err + EDGE_GAMMA * (self.ray_tmax * det).abs();
         if near_tmin || near_tmax {
-            return self.intersect_f64(v0, v1, v2, tmin, tmax);
+            return TriTest::Unsure;
         }
+        let rcp_det = 1.0 / det;
+        let t = t_scaled * rcp_det;
+        if !(t >= tmin && t <= tmax) {
+            return TriTest::Miss;
+        }
+        TriTest::Hit(t, v * rcp_det, w * rcp_det)
+    }
+
+    /// The plain test (Woop, Benthin & Wald 2013) after the edge functions: the
+    /// f64 recompute only at an edge function of 0; twin of the `!ROBUST` branch.
+    fn intersect_plain(
+        &self,
+        [ax, ay, bx, by, cx, cy]: [f32; 6],
+        [mut u, mut v, mut w]: [f32; 3],
+        [az, bz, cz]: [f32; 3],
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+            u = (cx * by - cy * bx) as f32;
+            v = (ax * cy - ay * cx) as f32;
+            w = (bx * ay - by * ax) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let (az, bz, cz) = (self.sz * az, self.sz * bz, self.sz * cz);
+        let t_scaled = u * az + v * bz + w * cz;
         let rcp_det = 1.0 / det;
         let t = t_scaled * rcp_det;
         if !(t >= tmin && t <= tmax) {
@@ -296,7 +389,7 @@ impl WatertightRay {
     /// functions with exact signs ([`diff_of_products`]): the triangles around an
     /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
     /// of them, never none.
-    fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
         let a = v0.as_dvec3() - o;
         let b = v1.as_dvec3() - o;

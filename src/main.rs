@@ -85,6 +85,10 @@ struct TraversalArgs {
     /// Require this subgroup size (VK_EXT_subgroup_size_control); default: the device's.
     #[arg(long)]
     subgroup_size: Option<u32>,
+    /// Turn the robustness measures off: plain f32 split decisions and the f64
+    /// recompute only at an edge function of 0 (to measure what they cost).
+    #[arg(long)]
+    plain: bool,
 }
 
 impl TraversalArgs {
@@ -95,6 +99,7 @@ impl TraversalArgs {
             any_hit,
             packet_width: self.packet_width,
             subgroup_size: self.subgroup_size,
+            robust: !self.plain,
         };
         traversal.validate()?;
         Ok(traversal)
@@ -173,7 +178,8 @@ struct BenchArgs {
     /// Rays per batch checked against the float64 brute force.
     #[arg(long, default_value_t = 1000)]
     reference_sample: usize,
-    /// Comma-separated traversals, `name` or `name:stack-size` (default: all, short stacks of 1, 2, 3 and 8).
+    /// Comma-separated traversals, `name`, `name:stack-size`, either with `/plain` for the
+    /// robustness measures off (default: all, short stacks of 1, 2, 3 and 8).
     #[arg(long)]
     traversals: Option<String>,
     /// Lanes per packet for every traversal (1 = single rays).
@@ -476,14 +482,20 @@ fn bench(args: BenchArgs) -> Result<()> {
         Some(list) => list
             .split(',')
             .map(|item| {
-                let (name, size) = match item.trim().split_once(':') {
+                // `name[:stack-size][/plain]`
+                let (item_name, plain) = match item.trim().strip_suffix("/plain") {
+                    Some(rest) => (rest, true),
+                    None => (item.trim(), false),
+                };
+                let (name, size) = match item_name.split_once(':') {
                     Some((n, s)) => (n, s.parse::<u32>().with_context(|| format!("stack size in '{item}'"))?),
-                    None => (item.trim(), 3),
+                    None => (item_name, 3),
                 };
                 let t = Traversal {
                     stack_size: size,
                     packet_width: args.packet_width,
                     subgroup_size: args.subgroup_size,
+                    robust: !plain,
                     ..Traversal::closest(name.parse()?)
                 };
                 t.validate()?;

@@ -382,6 +382,7 @@ impl Tracer {
                     key.stack_size,
                     key.any_hit as u32,
                     key.packet_width,
+                    key.robust as u32,
                 ],
                 workgroup_size: TRACE_WORKGROUP_SIZE,
                 required_subgroup_size: key.subgroup_size,

@@ -79,7 +79,11 @@ fn check(name: &str, triangles: Vec<[Vec3; 3]>, rays_per_scene: usize) {
         for (i, ray) in rays.iter().enumerate() {
             let (hit, _) = trace_ray(&cpu, ray, traversal);
             assert_ne!(hit.prim_id, PRIM_INCOMPLETE, "{name} {traversal:?} ray {i} {ray:?} did not finish");
-            assert_eq!(gpu.hits[i].prim_id, hit.prim_id, "{name} {traversal:?} ray {i}: GPU != CPU");
+            assert_eq!(
+                gpu.hits[i].prim_id, hit.prim_id,
+                "{name} {traversal:?} ray {i} {ray:?}: GPU {:?} != CPU {hit:?}",
+                gpu.hits[i]
+            );
             assert_eq!(gpu.hits[i].t.to_bits(), hit.t.to_bits(), "{name} {traversal:?} ray {i}: GPU != CPU");
             if hit.t.to_bits() != stack[i].t.to_bits() {
                 // Known limits of the stackless variants (issue 7 makes them exact):

@@ -49,13 +49,29 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
 // (EDGE_GAMMA_LOG2 from src/consts.rs).
 const float EDGE_GAMMA = 1.0 / float(1u << EDGE_GAMMA_LOG2);
 
-// a*b - c*d in f64 with Kahan's FMA algorithm: within 2 ulps, so its sign is
-// exact (and it is 0 exactly when a*b == c*d).
+// The f64 product a*b as p + e exactly (Dekker 1971: Veltkamp's split into
+// 26-bit halves, no FMA, so every IEEE device gives the same bits; lavapipe does
+// not fuse fma).
+void two_product(double a, double b, out double p, out double e) {
+    precise double ca = 134217729.0 * a;
+    precise double a_hi = ca - (ca - a);
+    precise double a_lo = a - a_hi;
+    precise double cb = 134217729.0 * b;
+    precise double b_hi = cb - (cb - b);
+    precise double b_lo = b - b_hi;
+    precise double prod = a * b;
+    precise double err = ((a_hi * b_hi - prod) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo;
+    p = prod;
+    e = err;
+}
+
+// a*b - c*d in f64 from exact products: 0 exactly when a*b == c*d, and of the
+// exact sign unless the products' rounding errors cancel their difference.
 double diff_of_products(double a, double b, double c, double d) {
-    precise double p = c * d;
-    precise double err = fma(c, d, -p);
-    precise double f = fma(a, b, -p);
-    precise double r = f - err;
+    double p1, e1, p2, e2;
+    two_product(a, b, p1, e1);
+    two_product(c, d, p2, e2);
+    precise double r = (p1 - p2) + (e1 - e2);
     return r;
 }
 
@@ -103,13 +119,21 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     return true;
 }
 
-// Returns true and (t, u, v) when the ray hits the triangle at tmin <= t <= tmax.
-// `tmin` must be the ray's own; `tmax` may be the closest hit so far (the f64
-// decision near the ray's end uses `r.ray_tmax`, so a triangle's answer never
-// depends on what was tested before it).
+// The includer declares the specialization constant ROBUST (trace.comp): false
+// gives the plain test, with the f64 recompute only at an edge function of 0.
+//
+// The f32 test: TRI_HIT with (t, u, v) when the ray hits the triangle at
+// tmin <= t <= tmax, TRI_MISS, or TRI_UNSURE when rounding could decide it (an
+// edge function or the distance to the ray's bounds within its error bound):
+// then intersect_triangle_f64 decides. Whether a pair is unsure does not depend
+// on tmax (the closest hit so far), so callers may defer the f64 tests.
+// `tmin` must be the ray's own; the decision near the ray's end uses `r.ray_tmax`.
 // Edges and vertices are hits; a ray in the triangle's plane misses.
-bool intersect_triangle(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
-                        out float t_out, out float u_out, out float v_out) {
+#define TRI_MISS 0u
+#define TRI_HIT 1u
+#define TRI_UNSURE 2u
+uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
+                            out float t_out, out float u_out, out float v_out) {
     precise vec3 a = v0 - r.origin;
     precise vec3 b = v1 - r.origin;
     precise vec3 c = v2 - r.origin;
@@ -124,26 +148,37 @@ bool intersect_triangle(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, 
     precise float u = cx * by - cy * bx;
     precise float v = ax * cy - ay * cx;
     precise float w = bx * ay - by * ax;
-    // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
-    precise float aex = abs(a[r.kx]) + abs(r.sx * a[r.kz]);
-    precise float aey = abs(a[r.ky]) + abs(r.sy * a[r.kz]);
-    precise float bex = abs(b[r.kx]) + abs(r.sx * b[r.kz]);
-    precise float bey = abs(b[r.ky]) + abs(r.sy * b[r.kz]);
-    precise float cex = abs(c[r.kx]) + abs(r.sx * c[r.kz]);
-    precise float cey = abs(c[r.ky]) + abs(r.sy * c[r.kz]);
-    precise float eu = EDGE_GAMMA * (cex * bey + cey * bex);
-    precise float ev = EDGE_GAMMA * (aex * cey + aey * cex);
-    precise float ew = EDGE_GAMMA * (bex * aey + bey * aex);
-    // Certainly outside (one edge function surely negative, another surely positive)?
-    bool negative = u < -eu || v < -ev || w < -ew;
-    bool positive = u > eu || v > ev || w > ew;
-    if (negative && positive) return false;
-    // Any sign in doubt: decide in f64.
-    if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew)) {
-        return intersect_triangle_f64(r, v0, v1, v2, tmin, tmax, t_out, u_out, v_out);
+    if (!ROBUST) {
+        // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
+        if (u == 0.0 || v == 0.0 || w == 0.0) {
+            precise double du = double(cx) * double(by) - double(cy) * double(bx);
+            precise double dv = double(ax) * double(cy) - double(ay) * double(cx);
+            precise double dw = double(bx) * double(ay) - double(by) * double(ax);
+            u = float(du);
+            v = float(dv);
+            w = float(dw);
+        }
+        if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return TRI_MISS;
+    } else {
+        // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
+        precise float aex = abs(a[r.kx]) + abs(r.sx * a[r.kz]);
+        precise float aey = abs(a[r.ky]) + abs(r.sy * a[r.kz]);
+        precise float bex = abs(b[r.kx]) + abs(r.sx * b[r.kz]);
+        precise float bey = abs(b[r.ky]) + abs(r.sy * b[r.kz]);
+        precise float cex = abs(c[r.kx]) + abs(r.sx * c[r.kz]);
+        precise float cey = abs(c[r.ky]) + abs(r.sy * c[r.kz]);
+        precise float eu = EDGE_GAMMA * (cex * bey + cey * bex);
+        precise float ev = EDGE_GAMMA * (aex * cey + aey * cex);
+        precise float ew = EDGE_GAMMA * (bex * aey + bey * aex);
+        // Certainly outside (one edge function surely negative, another surely positive)?
+        bool negative = u < -eu || v < -ev || w < -ew;
+        bool positive = u > eu || v > ev || w > ew;
+        if (negative && positive) return TRI_MISS;
+        // Any sign in doubt: decide in f64.
+        if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew)) return TRI_UNSURE;
     }
     precise float det = u + v + w;
-    if (det == 0.0) return false;
+    if (det == 0.0) return TRI_MISS;
     precise float az = r.sz * a[r.kz];
     precise float bz = r.sz * b[r.kz];
     precise float cz = r.sz * c[r.kz];
@@ -155,18 +190,16 @@ bool intersect_triangle(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, 
     precise float at_tmax = t_scaled - r.ray_tmax * det;
     bool near_tmin = !isinf(tmin) && abs(at_tmin) <= t_err + EDGE_GAMMA * abs(tmin * det);
     bool near_tmax = !isinf(r.ray_tmax) && abs(at_tmax) <= t_err + EDGE_GAMMA * abs(r.ray_tmax * det);
-    if (near_tmin || near_tmax) {
-        return intersect_triangle_f64(r, v0, v1, v2, tmin, tmax, t_out, u_out, v_out);
-    }
+    if (ROBUST && (near_tmin || near_tmax)) return TRI_UNSURE;
     precise float rcp_det = 1.0 / det;
     precise float t = t_scaled * rcp_det;
-    if (!(t >= tmin && t <= tmax)) return false;
+    if (!(t >= tmin && t <= tmax)) return TRI_MISS;
     t_out = t;
     precise float bu = v * rcp_det;
     precise float bv = w * rcp_det;
     u_out = bu;
     v_out = bv;
-    return true;
+    return TRI_HIT;
 }
 
 #endif

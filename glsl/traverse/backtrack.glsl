@@ -10,9 +10,12 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
     uint node = 0u;
     float t1 = t1_scene;
     bool ties_go_far = false;
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    // While-while form (see stack.glsl): descend to a leaf, then visit it.
+    uint step = 0u;
+    while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
-        if (!node_is_leaf(n)) {
+        ++step;
+        while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, ties_go_far ? ANY_PLANE : EXACT_PLANE, near, far, ts);
@@ -24,7 +27,9 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             } else {
                 node = near;
             }
-            continue;
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;

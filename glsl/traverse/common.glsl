@@ -106,17 +106,19 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     uint above = node_above_child(n);
     near = below_first ? below : above;
     far = below_first ? above : below;
-    precise float ts = (split - o) * r.inv_dir[axis];
+    // Clamped finite, so that the widening below never computes inf - inf.
+    precise float ts = clamp((split - o) * r.inv_dir[axis], -3.40282347e38, 3.40282347e38);
     t_split = ts;
     if (d == 0.0 && o == split) return VISIT_BOTH_SAME;
     // Conservative: one child only when the plane lies beyond the segment by more
     // than rounding (Ize 2013 in spirit). After a restart (t0 = a leaf exit) the
     // near side of a plane is skipped when the plane lies before t0, or at t0 and
     // it is the plane the last leaf was left through.
-    precise float ts_lo = ts - T_EPS * abs(ts);
-    precise float ts_hi = ts + T_EPS * abs(ts);
-    precise float t1_hi = t1 + T_EPS * abs(t1);
-    precise float t0_lo = t0 - T_EPS * abs(t0);
+    float eps = ROBUST ? T_EPS : 0.0;
+    precise float ts_lo = ts - eps * abs(ts);
+    precise float ts_hi = ts + eps * abs(ts);
+    precise float t1_hi = t1 + eps * abs(t1);
+    precise float t0_lo = t0 - eps * abs(t0);
     if (ts_lo > t1_hi) return VISIT_NEAR;
     bool far_only;
     if (exit_plane.x == NO_PLANE.x) {
@@ -138,24 +140,38 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     return VISIT_BOTH;
 }
 
+// Loads the triangle of the leaf reference `index` (stored in prim_indices
+// order, the prim id inline).
+uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
+    int base = int(index) * 3;
+    uvec4 a = texelFetch(tri_texels, base);
+    v0 = uintBitsToFloat(a.xyz);
+    v1 = uintBitsToFloat(texelFetch(tri_texels, base + 1).xyz);
+    v2 = uintBitsToFloat(texelFetch(tri_texels, base + 2).xyz);
+    return a.w;
+}
+
 // Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t);
-// any-hit mode stops at the first hit. Returns false when the driver cut the
-// loop short (see trace.comp).
+// any-hit mode stops at the first hit. Returns false when the driver cut a loop
+// short (see trace.comp).
+//
+// The f32 tests come first; the few pairs they leave unsure are decided in f64
+// afterwards, in a loop of their own: SIMD drivers such as lavapipe execute both
+// sides of a branch under a mask, but skip a loop no lane enters, so the f64
+// code costs nothing in a subgroup where no ray needs it.
 bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) {
     uint count = node_prim_count(n);
     uint offset = node_prim_offset(n);
     uint i = 0u;
     bool stopped = false;
+    uint unsure = 0u;          // pairs left to f64
+    uint first_unsure = count;
     for (; i < count; ++i) {
-        // The leaf's references are stored in prim_indices order, the prim id inline.
-        int base = int(offset + i) * 3;
-        uvec4 a = texelFetch(tri_texels, base);
-        vec3 v0 = uintBitsToFloat(a.xyz);
-        vec3 v1 = uintBitsToFloat(texelFetch(tri_texels, base + 1).xyz);
-        vec3 v2 = uintBitsToFloat(texelFetch(tri_texels, base + 2).xyz);
-        uint prim = a.w;
+        vec3 v0, v1, v2;
+        uint prim = load_triangle(offset + i, v0, v1, v2);
         float t, u, v;
-        if (intersect_triangle(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v)) {
+        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v);
+        if (result == TRI_HIT) {
             best.t = t;
             best.prim_id = prim;
             best.u = u;
@@ -164,10 +180,30 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
                 stopped = true;
                 break;
             }
+        } else if (result == TRI_UNSURE) {
+            first_unsure = min(first_unsure, i);
+            unsure += 1u;
         }
     }
     c.triangles += stopped ? i + 1u : count;
-    return stopped || i == count;
+    bool complete = stopped || i == count;
+    if (stopped) unsure = 0u;
+    uint j = first_unsure;
+    for (; unsure > 0u && j < count; ++j) {
+        vec3 v0, v1, v2;
+        uint prim = load_triangle(offset + j, v0, v1, v2);
+        float t, u, v;
+        if (intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v) != TRI_UNSURE) continue;
+        unsure -= 1u;
+        if (intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v)) {
+            best.t = t;
+            best.prim_id = prim;
+            best.u = u;
+            best.v = v;
+            if (ANY_HIT) unsure = 0u;
+        }
+    }
+    return complete && unsure == 0u;
 }
 
 // Visits a leaf whose segment ends at t1.

@@ -12,9 +12,12 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout T
     float t0_restart = t0;  // where the segment started at the last restart
     uvec2 exit_plane = NO_PLANE;  // the plane the last leaf was left through
     uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    // While-while form (see stack.glsl): descend to a leaf, then visit it.
+    uint step = 0u;
+    while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
-        if (!node_is_leaf(n)) {
+        ++step;
+        while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
@@ -29,7 +32,9 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout T
                 // be followed without a stack: the near one).
                 node = near;
             }
-            continue;
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;

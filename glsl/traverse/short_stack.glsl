@@ -21,9 +21,12 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
     uint restart_node = 0u;
     bool push_down = use_push_down;
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    // While-while form (see stack.glsl): descend to a leaf, then visit it.
+    uint step = 0u;
+    while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
-        if (!node_is_leaf(n)) {
+        ++step;
+        while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
@@ -51,7 +54,9 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 push_down = false;
             }
             if (push_down) restart_node = node;
-            continue;
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;

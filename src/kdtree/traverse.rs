@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::links::{TreeLinks, NO_ROPE};
 use super::KdNode;
 use crate::consts::{MAX_SHORT_STACK, MAX_STACK, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
-use crate::geom::{Aabb, Hit, Ray, WatertightRay};
+use crate::geom::{Aabb, Hit, Ray, TriTest, WatertightRay};
 
 /// The traversal algorithms (specialization constant `VARIANT` of `trace.comp`),
 /// each in its own file under `glsl/traverse/` with its twin below.
@@ -116,12 +116,19 @@ pub struct Traversal {
     pub packet_width: u32,
     /// A required subgroup size (`VK_EXT_subgroup_size_control`); `None` = the device's.
     pub subgroup_size: Option<u32>,
+    /// The robustness measures (default on): conservative split decisions
+    /// (Ize 2013 in spirit), and the watertight test's f64 fallback whenever an
+    /// edge function or the hit's distance to the ray's bounds lies within its
+    /// rounding error. Off: plain f32 decisions and the f64 recompute only at an
+    /// edge function of exactly 0 (Woop, Benthin & Wald 2013) — to measure what
+    /// the measures cost. A specialization constant: no cost when off.
+    pub robust: bool,
 }
 
 impl Traversal {
     /// Closest hit with `variant`, the paper's short stack of 3, single rays.
     pub fn closest(variant: Variant) -> Self {
-        Traversal { variant, stack_size: 3, any_hit: false, packet_width: 1, subgroup_size: None }
+        Traversal { variant, stack_size: 3, any_hit: false, packet_width: 1, subgroup_size: None, robust: true }
     }
 
     /// True when the kernel traces packets with this traversal.
@@ -205,6 +212,8 @@ impl<'a> SceneRef<'a> {
 
 struct TraceRay {
     wr: WatertightRay,
+    /// [`Traversal::robust`]: the widening of the split decisions.
+    eps: f32,
     origin: Vec3,
     dir: Vec3,
     inv_dir: Vec3,
@@ -237,7 +246,8 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         let origin = Vec3::from(ray.origin);
         let dir = ray.traced_dir();
         let r = TraceRay {
-            wr: WatertightRay::new(origin, dir).with_tmax(ray.tmax),
+            wr: WatertightRay { robust: traversal.robust, ..WatertightRay::new(origin, dir).with_tmax(ray.tmax) },
+            eps: if traversal.robust { T_EPS } else { 0.0 },
             origin,
             dir,
             // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
@@ -395,11 +405,13 @@ fn decide_children(
     let below_first = !d.is_sign_negative();
     let (below, above) = (index + 1, n.above_child());
     let (near, far) = if below_first { (below, above) } else { (above, below) };
-    let ts = (split - o) * r.inv_dir[axis];
+    // Clamped finite, so that the widening below never computes inf - inf.
+    let ts = ((split - o) * r.inv_dir[axis]).clamp(-f32::MAX, f32::MAX);
     // Conservative (see common.glsl): one child only beyond rounding; after a
     // restart, planes before t0 are passed, and so is the exit plane at t0.
-    let (ts_lo, ts_hi) = (ts - T_EPS * ts.abs(), ts + T_EPS * ts.abs());
-    let (t0_lo, t1_hi) = (t0 - T_EPS * t0.abs(), t1 + T_EPS * t1.abs());
+    let eps = r.eps;
+    let (ts_lo, ts_hi) = (ts - eps * ts.abs(), ts + eps * ts.abs());
+    let (t0_lo, t1_hi) = (t0 - eps * t0.abs(), t1 + eps * t1.abs());
     let far_only = match exit_plane {
         ExitPlane::None => ts_hi < t0_lo,
         ExitPlane::Any => ts <= t0,
@@ -420,20 +432,43 @@ fn decide_children(
 }
 
 /// Twin of `intersect_leaf` in common.glsl. Any-hit mode stops at the first hit.
+/// The f32 tests first, then the f64 tests of the pairs they left unsure, in
+/// leaf order (as the shader does, see common.glsl).
 fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, c: &mut Counters) {
     let offset = n.prim_offset() as usize;
     let count = n.prim_count() as usize;
-    for (i, &prim) in scene.prim_indices[offset..offset + count].iter().enumerate() {
+    let prims = &scene.prim_indices[offset..offset + count];
+    let mut unsure = false;
+    for (i, &prim) in prims.iter().enumerate() {
         let [v0, v1, v2] = scene.triangles[prim as usize];
-        if let Some((t, u, v)) = r.wr.intersect(v0, v1, v2, r.tmin, best.t) {
+        match r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t) {
+            TriTest::Hit(t, u, v) => {
+                *best = Hit { t, prim_id: prim, u, v };
+                if r.any_hit {
+                    c.triangles += i as u32 + 1;
+                    return;
+                }
+            }
+            TriTest::Unsure => unsure = true,
+            TriTest::Miss => {}
+        }
+    }
+    c.triangles += count as u32;
+    if !unsure {
+        return;
+    }
+    for &prim in prims {
+        let [v0, v1, v2] = scene.triangles[prim as usize];
+        if r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t) != TriTest::Unsure {
+            continue;
+        }
+        if let Some((t, u, v)) = r.wr.intersect_f64(v0, v1, v2, r.tmin, best.t) {
             *best = Hit { t, prim_id: prim, u, v };
             if r.any_hit {
-                c.triangles += i as u32 + 1;
                 return;
             }
         }
     }
-    c.triangles += count as u32;
 }
 
 /// Twin of `trace_stack` in glsl/traverse/stack.glsl.
