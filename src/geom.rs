@@ -415,8 +415,18 @@ impl WatertightRay {
         if det == 0.0 {
             return None;
         }
-        let t_scaled = u * a[kz] + v * b[kz] + w * c[kz];
-        let t64 = t_scaled / (det * d[kz]);
+        // t from the plane, with the normal from the (exact) f32 edge differences:
+        // an origin on a triangle in an axis plane gives t = 0 exactly.
+        let (e1, e2) = (v1.as_dvec3() - v0.as_dvec3(), v2.as_dvec3() - v0.as_dvec3());
+        let nx = e1.y * e2.z - e1.z * e2.y;
+        let ny = e1.z * e2.x - e1.x * e2.z;
+        let nz = e1.x * e2.y - e1.y * e2.x;
+        let num = a.x * nx + a.y * ny + a.z * nz;
+        let den = d.x * nx + d.y * ny + d.z * nz;
+        if den == 0.0 {
+            return None;
+        }
+        let t64 = num / den;
         // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
         let t = t64 as f32;
         if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64 && t <= tmax) {

@@ -106,8 +106,18 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return false;
     precise double det = u + v + w;
     if (det == 0.0) return false;
-    precise double t_scaled = u * a[kz] + v * b[kz] + w * c[kz];
-    precise double t64 = t_scaled / (det * d[kz]);
+    // t from the plane: ((v0 - o) . n) / (d . n) with n from the edges, which are
+    // exact f32 differences: for a triangle in an axis plane n has two exact
+    // zeros, so an origin on that plane gives t = 0 exactly.
+    precise dvec3 e1 = dvec3(v1) - dvec3(v0);
+    precise dvec3 e2 = dvec3(v2) - dvec3(v0);
+    precise double nx = e1.y * e2.z - e1.z * e2.y;
+    precise double ny = e1.z * e2.x - e1.x * e2.z;
+    precise double nz = e1.x * e2.y - e1.y * e2.x;
+    precise double num = a.x * nx + a.y * ny + a.z * nz;
+    precise double den = d.x * nx + d.y * ny + d.z * nz;
+    if (den == 0.0) return false;
+    precise double t64 = num / den;
     // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
     float t = float(t64);
     if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax) && t <= tmax)) return false;
