@@ -124,6 +124,28 @@ fn stress_scene(name: &str, scale: f32) {
                 failures.push(format!("{label}: overall agreement {:.4}", all.agreement()));
             }
         }
+        // Any-hit (shadow) mode on the GPU: some real occluder, or none exactly when
+        // nothing is hit; a wrong occluder or a missed interior one is serious.
+        let any = Traversal { any_hit: true, ..traversal };
+        let mut shadow = Tally::default();
+        for (category, rays, exacts, _) in &batches {
+            let hits = tracer.trace(rays, &TraceOptions { traversal: any, counters: false }).unwrap().hits;
+            let t = judge_with(triangles, rays, &hits, exacts, true);
+            if t.serious() > 0 {
+                failures.push(format!(
+                    "{name} ×{scale} {} any-hit / {}: {} serious: {:?}",
+                    traversal.variant.name(),
+                    category.name(),
+                    t.serious(),
+                    t.serious_examples
+                ));
+            }
+            shadow.rays += t.rays;
+            for (n, m) in shadow.counts.iter_mut().zip(t.counts) {
+                *n += m;
+            }
+        }
+        println!("{}", table_row(&format!("{} any-hit, all categories", traversal.variant.name()), &shadow));
     }
     assert_validation_clean(&ctx);
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
