@@ -29,23 +29,21 @@ fn soup() -> impl Strategy<Value = Vec<[Vec3; 3]>> {
 /// Rays from anywhere, aimed at a vertex, an edge point or anywhere.
 fn rays(tris: &[[Vec3; 3]]) -> impl Strategy<Value = Vec<Ray>> {
     let tris = tris.to_vec();
-    prop::collection::vec((point(), 0usize..1000, 0usize..3, 0u8..3, -3.0f32..3.0), 1..24).prop_map(
-        move |items| {
-            items
-                .into_iter()
-                .map(|(origin, t, k, kind, s)| {
-                    let tri = tris[t % tris.len()];
-                    let target = match kind {
-                        0 => tri[k],
-                        1 => tri[k] + 0.5 * (tri[(k + 1) % 3] - tri[k]),
-                        _ => Vec3::splat(s),
-                    };
-                    let dir = if target == origin { Vec3::X } else { target - origin };
-                    Ray::new(origin, dir, 0.0, f32::INFINITY)
-                })
-                .collect()
-        },
-    )
+    prop::collection::vec((point(), 0usize..1000, 0usize..3, 0u8..3, -3.0f32..3.0), 1..24).prop_map(move |items| {
+        items
+            .into_iter()
+            .map(|(origin, t, k, kind, s)| {
+                let tri = tris[t % tris.len()];
+                let target = match kind {
+                    0 => tri[k],
+                    1 => tri[k] + 0.5 * (tri[(k + 1) % 3] - tri[k]),
+                    _ => Vec3::splat(s),
+                };
+                let dir = if target == origin { Vec3::X } else { target - origin };
+                Ray::new(origin, dir, 0.0, f32::INFINITY)
+            })
+            .collect()
+    })
 }
 
 proptest! {

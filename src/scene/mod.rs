@@ -146,6 +146,18 @@ impl Scene {
         Ok(Scene::assemble(Some(path.to_path_buf()), obj.triangles, material_ids, materials))
     }
 
+    /// A scene from OBJ text in memory, geometry only: `mtllib` is not followed
+    /// and every face gets the default material. `name` names the source in
+    /// errors. The same checks and errors as [`Scene::load`].
+    pub fn from_obj_bytes(name: &Path, bytes: &[u8]) -> Result<Scene> {
+        let obj = obj::parse_obj(name, bytes)?;
+        if obj.triangles.is_empty() {
+            return Err(obj::scene_error(name, None, "scene has no triangles"));
+        }
+        let ids = vec![0; obj.triangles.len()];
+        Ok(Scene::assemble(Some(name.to_path_buf()), obj.triangles, ids, vec![Material::default()]))
+    }
+
     /// A scene of the given triangles with one default material. Fails with
     /// `Error::InvalidInput` when there are no triangles or a coordinate is not finite.
     pub fn from_triangles(triangles: Vec<[Vec3; 3]>) -> Result<Scene> {
