@@ -60,7 +60,16 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
-        if (leaf == LEAF_DONE) return true;
+        if (leaf == LEAF_DONE) {
+            if (ANY_HIT) return true;
+            // As in stack.glsl: only entries starting before the hit can hold a
+            // closer one (the other side of a split plane the ray lies in).
+            while (count > 0u && !(stack_t0[(head + STACK_SIZE - 1u) % STACK_SIZE] < best.t)) {
+                head = (head + STACK_SIZE - 1u) % STACK_SIZE;
+                count -= 1u;
+            }
+            if (count == 0u) return true;
+        }
         if (count > 0u) {
             head = (head + STACK_SIZE - 1u) % STACK_SIZE;
             count -= 1u;

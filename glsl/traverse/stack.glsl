@@ -46,7 +46,14 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
         }
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
-        if (leaf == LEAF_DONE || sp == 0u) return true;
+        if (leaf == LEAF_DONE) {
+            if (ANY_HIT) return true;
+            // A closer hit can only lie in an entry that starts before this one: the
+            // other side of a split plane the ray lies in (VISIT_BOTH_SAME) has the
+            // same segment as the leaf just done. Drop the entries behind the hit.
+            while (sp > 0u && !(stack_t0[sp - 1u] < best.t)) --sp;
+        }
+        if (sp == 0u) return true;
         --sp;
         node = stack_node[sp];
         t0 = stack_t0[sp];

@@ -497,7 +497,16 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
             }
             continue;
         }
-        if s.leaf(n, t1) || sp == 0 {
+        if s.leaf(n, t1) {
+            if s.r.any_hit {
+                return true;
+            }
+            // Only entries starting before the hit can hold a closer one (stack.glsl).
+            while sp > 0 && !(stack[sp - 1].1 < s.best.t) {
+                sp -= 1;
+            }
+        }
+        if sp == 0 {
             return true;
         }
         sp -= 1;
@@ -637,7 +646,17 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
             continue;
         }
         if s.leaf(n, t1) {
-            return true;
+            if s.r.any_hit {
+                return true;
+            }
+            // As in trace_stack: only entries starting before the hit can hold a closer one.
+            while count > 0 && !(stack[(head + size - 1) % size].1 < s.best.t) {
+                head = (head + size - 1) % size;
+                count -= 1;
+            }
+            if count == 0 {
+                return true;
+            }
         }
         if count > 0 {
             head = (head + size - 1) % size;
