@@ -1030,20 +1030,20 @@ mod tests {
 
     /// 100k tiny triangles sharing one point (every split duplicates most of
     /// them), and 100k more of zero area there: a valid tree, in bounded time
-    /// and memory (slow in debug builds).
+    /// and memory (about a minute in the test profile on 2 cores).
     #[test]
-    #[ignore]
     fn hundred_thousand_triangles_at_one_point() {
         let mut rng = Rng::new(5);
         let v = Vec3::new(0.3, -0.0, 0.7);
         let mut tris: Vec<[Vec3; 3]> =
             (0..100_000).map(|_| [v, v + rng.vec3(-1e-6, 1e-6), v + rng.vec3(-1e-6, 1e-6)]).collect();
         tris.extend(vec![[v, v, v]; 100_000]);
-        for config in [BuildConfig::default(), BuildConfig::PBRT_V3] {
-            let tree = KdTree::build(&tris, &config);
-            eprintln!("100k tiny + 100k zero-area at one point: {}", tree.stats);
-            check_tree(&tris, &tree, &config);
-        }
+        // The default configuration here; `BuildConfig::PBRT_V3` takes as long again
+        // (run it with `cargo test --release` when changing the builder).
+        let config = BuildConfig::default();
+        let tree = KdTree::build(&tris, &config);
+        eprintln!("100k tiny + 100k zero-area at one point: {}", tree.stats);
+        check_tree(&tris, &tree, &config);
     }
 
     /// A million triangles: no stack overflow, bounded depth (slow in debug builds).
