@@ -337,6 +337,12 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
     (t0 <= t1).then_some((t0, t1))
 }
 
+/// True when a stack entry starting at `t0` can hold a hit closer than `best_t`
+/// (`t0 < best_t`; false for NaN, as the shader's `!(t0 < best.t)` drops it).
+fn starts_before(t0: f32, best_t: f32) -> bool {
+    t0 < best_t
+}
+
 /// Twin of `restart_point` in common.glsl: the start of the segment after a
 /// restart, the last leaf's exit or, when rounding put it at or before the
 /// previous restart point, the next float after that point (progress).
@@ -502,7 +508,7 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
                 return true;
             }
             // Only entries starting before the hit can hold a closer one (stack.glsl).
-            while sp > 0 && !(stack[sp - 1].1 < s.best.t) {
+            while sp > 0 && !starts_before(stack[sp - 1].1, s.best.t) {
                 sp -= 1;
             }
         }
@@ -650,7 +656,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 return true;
             }
             // As in trace_stack: only entries starting before the hit can hold a closer one.
-            while count > 0 && !(stack[(head + size - 1) % size].1 < s.best.t) {
+            while count > 0 && !starts_before(stack[(head + size - 1) % size].1, s.best.t) {
                 head = (head + size - 1) % size;
                 count -= 1;
             }
