@@ -125,14 +125,8 @@ impl ExactRay {
             return None;
         }
         let (o, d) = (Vec3::from(ray.origin), ray.traced_dir());
-        let a = d.abs();
-        let k = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
+        // The watertight test's dominant axis (any axis with d[k] != 0 would do).
+        let k = crate::geom::WatertightRay::new(o, d).kz;
         Some(ExactRay {
             origin: fixed3(o),
             dir: fixed3(d),
