@@ -1,7 +1,8 @@
 // `restart`: kd-restart (Foley & Sugerman 2005), no stack. After a leaf without
 // a hit inside it, the segment becomes [leaf exit, scene exit] and descent starts
-// again at the root. Progress: after the first restart, ties at t0 go to the far
-// child, so every leaf reached ends strictly after t0.
+// again at the root. Progress: after a restart the plane the last leaf was left
+// through goes far on a tie, planes before t0 are passed, and the restart point
+// always moves forward (restart_point in common.glsl), so restarts end.
 // CPU twin: `trace_restart` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_RESTART_GLSL
 #define TRAVERSE_RESTART_GLSL
