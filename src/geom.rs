@@ -293,34 +293,39 @@ impl WatertightRay {
         let cx = c[kx] - self.sx * c[kz];
         let cy = c[ky] - self.sy * c[kz];
         // Scaled barycentric coordinates (edge functions).
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
+        let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
         if !self.robust {
-            return match self.intersect_plain([ax, ay, bx, by, cx, cy], [u, v, w], [a[kz], b[kz], c[kz]], tmin, tmax) {
-                Some((t, u, v)) => TriTest::Hit(t, u, v),
-                None => TriTest::Miss,
-            };
-        }
-        // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
-        let aex = a[kx].abs() + (self.sx * a[kz]).abs();
-        let aey = a[ky].abs() + (self.sy * a[kz]).abs();
-        let bex = b[kx].abs() + (self.sx * b[kz]).abs();
-        let bey = b[ky].abs() + (self.sy * b[kz]).abs();
-        let cex = c[kx].abs() + (self.sx * c[kz]).abs();
-        let cey = c[ky].abs() + (self.sy * c[kz]).abs();
-        let eu = EDGE_GAMMA * (cex * bey + cey * bex);
-        let ev = EDGE_GAMMA * (aex * cey + aey * cex);
-        let ew = EDGE_GAMMA * (bex * aey + bey * aex);
-        // Certainly outside (one edge function surely negative, another surely positive)?
-        let negative = u < -eu || v < -ev || w < -ew;
-        let positive = u > eu || v > ev || w > ew;
-        if negative && positive {
-            return TriTest::Miss;
-        }
-        // Any sign in doubt: decide in f64.
-        if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
-            return TriTest::Unsure;
+            // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
+            if u == 0.0 || v == 0.0 || w == 0.0 {
+                let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+                u = (cx * by - cy * bx) as f32;
+                v = (ax * cy - ay * cx) as f32;
+                w = (bx * ay - by * ax) as f32;
+            }
+            if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+                return TriTest::Miss;
+            }
+        } else {
+            // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
+            let aex = a[kx].abs() + (self.sx * a[kz]).abs();
+            let aey = a[ky].abs() + (self.sy * a[kz]).abs();
+            let bex = b[kx].abs() + (self.sx * b[kz]).abs();
+            let bey = b[ky].abs() + (self.sy * b[kz]).abs();
+            let cex = c[kx].abs() + (self.sx * c[kz]).abs();
+            let cey = c[ky].abs() + (self.sy * c[kz]).abs();
+            let eu = EDGE_GAMMA * (cex * bey + cey * bex);
+            let ev = EDGE_GAMMA * (aex * cey + aey * cex);
+            let ew = EDGE_GAMMA * (bex * aey + bey * aex);
+            // Certainly outside (one edge function surely negative, another surely positive)?
+            let negative = u < -eu || v < -ev || w < -ew;
+            let positive = u > eu || v > ev || w > ew;
+            if negative && positive {
+                return TriTest::Miss;
+            }
+            // Any sign in doubt: decide in f64.
+            if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
+                return TriTest::Unsure;
+            }
         }
         let det = u + v + w;
         if det == 0.0 {
@@ -338,7 +343,7 @@ impl WatertightRay {
         let near_tmin = !tmin.is_infinite() && at_tmin.abs() <= t_err + EDGE_GAMMA * (tmin * det).abs();
         let near_tmax =
             !self.ray_tmax.is_infinite() && at_tmax.abs() <= t_err + EDGE_GAMMA * (self.ray_tmax * det).abs();
-        if near_tmin || near_tmax {
+        if self.robust && (near_tmin || near_tmax) {
             return TriTest::Unsure;
         }
         let rcp_det = 1.0 / det;
@@ -347,39 +352,6 @@ impl WatertightRay {
             return TriTest::Miss;
         }
         TriTest::Hit(t, v * rcp_det, w * rcp_det)
-    }
-
-    /// The plain test (Woop, Benthin & Wald 2013) after the edge functions: the
-    /// f64 recompute only at an edge function of 0; twin of the `!ROBUST` branch.
-    fn intersect_plain(
-        &self,
-        [ax, ay, bx, by, cx, cy]: [f32; 6],
-        [mut u, mut v, mut w]: [f32; 3],
-        [az, bz, cz]: [f32; 3],
-        tmin: f32,
-        tmax: f32,
-    ) -> Option<(f32, f32, f32)> {
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-            u = (cx * by - cy * bx) as f32;
-            v = (ax * cy - ay * cx) as f32;
-            w = (bx * ay - by * ax) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
-        let (az, bz, cz) = (self.sz * az, self.sz * bz, self.sz * cz);
-        let t_scaled = u * az + v * bz + w * cz;
-        let rcp_det = 1.0 / det;
-        let t = t_scaled * rcp_det;
-        if !(t >= tmin && t <= tmax) {
-            return None;
-        }
-        Some((t, v * rcp_det, w * rcp_det))
     }
 
     /// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the

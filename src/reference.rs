@@ -97,19 +97,9 @@ impl RefRay {
         }
         let origin = Vec3::from(ray.origin).as_dvec3();
         let dir = ray.traced_dir().as_dvec3();
-        let a = dir.abs();
-        let mut kz = 0;
-        if a.y > a[kz] {
-            kz = 1;
-        }
-        if a.z > a[kz] {
-            kz = 2;
-        }
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        // The watertight test's axes (in f64 the same order of |dir| components).
+        let wr = crate::geom::WatertightRay::new(Vec3::from(ray.origin), ray.traced_dir());
+        let (kx, ky, kz) = (wr.kx, wr.ky, wr.kz);
         let sz = 1.0 / dir[kz];
         Some(RefRay {
             origin,

@@ -330,11 +330,10 @@ pub fn judge_with(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], exacts: &
         .zip(hits)
         .zip(exacts)
         .map(|((ray, hit), exact)| {
-            let exact = exact.clone();
             if any_hit {
-                (judge_any(triangles, ray, hit, &exact), 0.0)
+                (judge_any(triangles, ray, hit, exact), 0.0)
             } else {
-                let (v, err) = judge(triangles, ray, hit, &exact);
+                let (v, err) = judge(triangles, ray, hit, exact);
                 let o = Vec3::from(ray.origin).as_dvec3();
                 let p = o + hit.t as f64 * Vec3::from(ray.dir).as_dvec3();
                 let scale = o.abs().max_element().max(p.abs().max_element()).max(f64::MIN_POSITIVE);

@@ -8,7 +8,8 @@
 //! primitive differs from the stack's and neither is in the exact tie set,
 //! neither answer is serious; agreement with the exact answer of at least
 //! `OVERALL_FLOOR` over all categories and `CATEGORY_FLOOR` in each (some
-//! categories do not reach 99 % yet: see docs/ACCURACY.md). Watertightness: no
+//! categories do not reach 99 % yet with the stackless variants: see
+//! docs/ACCURACY.md), and `STACK_FLOOR` (98 %) in each for the full stack. Watertightness: no
 //! escape with the full stack, and no more than the measured rates for the
 //! others. The tables are printed (`--nocapture`).
 
@@ -30,6 +31,10 @@ use kdtrace::{Hit, Ray};
 const RAYS: usize = 600;
 /// Lowest agreement any category may have (see the module docs).
 const CATEGORY_FLOOR: f64 = 0.85;
+/// Lowest agreement in any category for the full stack. The goal is 99 %; rays
+/// from 1e5 scene sizes away measure 98.5–99.4 % (their disagreements are all
+/// neighbours across a shared edge, within rounding), so the floor sits below.
+const STACK_FLOOR: f64 = 0.98;
 /// Lowest agreement over all categories of one scene and traversal.
 const OVERALL_FLOOR: f64 = 0.97;
 
@@ -99,7 +104,8 @@ fn stress_scene(name: &str, scale: f32) {
                         t.serious_examples
                     ));
                 }
-                if t.agreement() < CATEGORY_FLOOR {
+                let floor = if traversal.variant == Variant::Stack { STACK_FLOOR } else { CATEGORY_FLOOR };
+                if t.agreement() < floor {
                     failures.push(format!("{label} / {}: agreement {:.4}", category.name(), t.agreement()));
                 }
                 if traversal.variant != Variant::Stack {

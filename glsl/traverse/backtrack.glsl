@@ -9,7 +9,8 @@
 bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
     uint node = 0u;
     float t1 = t1_scene;
-    bool ties_go_far = false;
+    // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
+    uvec2 exit_plane = EXACT_PLANE;
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -18,7 +19,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far ? ANY_PLANE : EXACT_PLANE, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
@@ -47,7 +48,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         if (exit_t <= t0 && node != 0u && depth < MAX_STACK) return false;  // climb cut short
         if (exit_t <= t0) return true;  // the root's box ends here: nothing left
         t1 = min(min(exit_t, t1_scene), best.t);
-        ties_go_far = true;
+        exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
     return false;

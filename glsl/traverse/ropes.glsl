@@ -10,7 +10,8 @@
 bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
     uint node = 0u;
     float t1 = t1_scene;
-    bool ties_go_far = false;
+    // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
+    uvec2 exit_plane = EXACT_PLANE;
     uint step = 0u;
     // While-while form, as in stack.glsl: descend to a leaf, then visit it.
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -19,7 +20,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         while (!node_is_leaf(n)) {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, ties_go_far ? ANY_PLANE : EXACT_PLANE, near, far, ts);
+            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
@@ -45,7 +46,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         t0 = max(t0, leaf_t1);
         t1 = min(t1_scene, best.t);
         node = next;
-        ties_go_far = true;
+        exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
     return false;

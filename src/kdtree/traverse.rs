@@ -709,12 +709,12 @@ fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize) {
 fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut ties_go_far = false;
+    // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
+    let mut exit_plane = ExitPlane::Exact;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) =
-                decide_children(s.r, node, n, t0, t1, if ties_go_far { ExitPlane::Any } else { ExitPlane::Exact });
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
@@ -742,7 +742,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
             return true; // the root's box ends here: nothing left
         }
         t1 = glsl_min(glsl_min(exit, t1_scene), s.best.t);
-        ties_go_far = true;
+        exit_plane = ExitPlane::Any;
         s.c.restarts += 1;
     }
     false
@@ -752,12 +752,12 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
 fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
     let mut node = 0u32;
     let mut t1 = t1_scene;
-    let mut ties_go_far = false;
+    // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
+    let mut exit_plane = ExitPlane::Exact;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
-            let (visit, near, far, ts) =
-                decide_children(s.r, node, n, t0, t1, if ties_go_far { ExitPlane::Any } else { ExitPlane::Exact });
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
@@ -782,7 +782,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         t0 = glsl_max(t0, leaf_t1);
         t1 = glsl_min(t1_scene, s.best.t);
         node = next;
-        ties_go_far = true;
+        exit_plane = ExitPlane::Any;
         s.c.restarts += 1;
     }
     false
