@@ -1,4 +1,4 @@
-//! Compiles every compute kernel `glsl/*.comp` to SPIR-V with shaderc and writes
+//! Compiles every kernel `glsl/*.comp` (and the graphics stages `glsl/*.vert`, `*.frag`) to SPIR-V with shaderc and writes
 //! `$OUT_DIR/shaders.rs`, which embeds them. `#include "x.glsl"` resolves against
 //! `glsl/shared/`, `glsl/traverse/` and `glsl/`. Shared constants come from
 //! `src/consts.rs` as `#define`s, so Rust and GLSL see one definition.
@@ -31,7 +31,7 @@ fn main() -> Result<()> {
     let mut kernels: Vec<PathBuf> = fs::read_dir(&glsl)
         .with_context(|| format!("reading {}", glsl.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "comp"))
+        .filter(|p| p.extension().is_some_and(|x| x == "comp" || x == "vert" || x == "frag"))
         .collect();
     kernels.sort();
     for dir in &include_dirs {
@@ -62,11 +62,14 @@ fn main() -> Result<()> {
         match compile(&compiler, path, &include_dirs, true) {
             Ok(words) => {
                 let stem = path.file_stem().unwrap().to_string_lossy().to_string();
-                let spv = out_dir.join(format!("{stem}.spv"));
+                let ext = path.extension().unwrap().to_string_lossy().to_string();
+                // Compute kernels are named by stem alone; graphics stages get their stage as suffix.
+                let name = if ext == "comp" { stem.clone() } else { format!("{stem}_{ext}") };
+                let spv = out_dir.join(format!("{name}.spv"));
                 fs::write(&spv, bytemuck_bytes(&words))?;
                 rs.push_str(&format!(
-                    "/// SPIR-V of `glsl/{stem}.comp`.\npub const {}: &[u8] = include_bytes!({:?});\n",
-                    stem.to_uppercase().replace('-', "_"),
+                    "/// SPIR-V of `glsl/{stem}.{ext}`.\npub const {}: &[u8] = include_bytes!({:?});\n",
+                    name.to_uppercase().replace('-', "_"),
                     spv.display().to_string()
                 ));
             }
@@ -135,6 +138,15 @@ fn bytemuck_bytes(words: &[u32]) -> Vec<u8> {
 }
 
 /// Compiles one compute shader; `defines`: pass the shared constants as `#define`s.
+/// The shader stage of `glsl/NAME.{comp,vert,frag}`.
+fn shader_kind(path: &Path) -> shaderc::ShaderKind {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("vert") => shaderc::ShaderKind::Vertex,
+        Some("frag") => shaderc::ShaderKind::Fragment,
+        _ => shaderc::ShaderKind::Compute,
+    }
+}
+
 fn compile(compiler: &shaderc::Compiler, path: &Path, include_dirs: &[PathBuf], defines: bool) -> Result<Vec<u32>> {
     let source = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut options = shaderc::CompileOptions::new().map_err(|e| anyhow!("shaderc options: {e}"))?;
@@ -162,7 +174,7 @@ fn compile(compiler: &shaderc::Compiler, path: &Path, include_dirs: &[PathBuf], 
     });
     let name = path.display().to_string();
     let artifact = compiler
-        .compile_into_spirv(&source, shaderc::ShaderKind::Compute, &name, "main", Some(&options))
+        .compile_into_spirv(&source, shader_kind(path), &name, "main", Some(&options))
         .map_err(|e| anyhow!("{e}"))?;
     if artifact.get_num_warnings() > 0 {
         for line in artifact.get_warning_messages().lines() {

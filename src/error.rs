@@ -59,6 +59,11 @@ pub enum Error {
     #[error("{0}")]
     InvalidInput(String),
 
+    /// Rays of a render were invalid (e.g. a NaN direction from degenerate
+    /// geometry) or did not finish traversal; the image would be wrong.
+    #[error("{0} ray(s) of the render were invalid or did not finish traversal")]
+    RenderRays(u64),
+
     /// Some rays did not finish traversal (step cap or a driver loop cut-off);
     /// their hits would be wrong, so they are reported instead of returned.
     #[error("{count} ray(s) did not finish traversal (first: ray {first}); the step cap is {cap}")]

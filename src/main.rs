@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use kdtrace::gpu::{list_devices, ContextOptions, GpuContext};
 use kdtrace::kdtree::traverse::{Counters, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::render::{PointLight, Primary, RenderPlan, RenderSettings};
 use kdtrace::scene::{Camera, Scene};
 use kdtrace::trace::{TraceOptions, Tracer};
 
@@ -23,7 +24,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a scene with primary rays and headlight shading to a PNG.
+    /// Render a scene: shadows, mirrors, ambient occlusion, path-traced diffuse light; PNG or EXR.
     Render(RenderArgs),
     /// Trace a binary ray file and write a binary hit file.
     Trace(TraceArgs),
@@ -69,6 +70,53 @@ struct RenderArgs {
     /// Write a per-pixel cost heatmap instead of the shaded image: nodes | triangles.
     #[arg(long)]
     heatmap: Option<String>,
+    /// Samples per pixel (jittered by a seeded, Owen-scrambled Sobol sequence when > 1).
+    #[arg(long, default_value_t = 1)]
+    spp: u32,
+    /// Seed of the sample sequence.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Ray segments per path at most (camera ray, reflections, bounces).
+    #[arg(long, default_value_t = 8)]
+    max_depth: u32,
+    /// Diffuse bounces (path-traced indirect light, next-event estimation toward emitters).
+    #[arg(long, default_value_t = 0)]
+    bounces: u32,
+    /// Ambient-occlusion rays at the first diffuse hit.
+    #[arg(long, default_value_t = 0)]
+    ao: u32,
+    /// Length of the ambient-occlusion rays (default: a tenth of the scene's diagonal).
+    #[arg(long)]
+    ao_radius: Option<f32>,
+    /// Ambient radiance let through by ambient occlusion (default 1 without other lights, else 0.1).
+    #[arg(long)]
+    ambient: Option<f32>,
+    /// A point light x,y,z[,intensity] (repeatable); the default intensity gives the
+    /// scene's centre an irradiance of pi, so a white surface facing it looks white.
+    #[arg(long, value_parser = parse_light, allow_hyphen_values = true)]
+    light: Vec<(Vec3, Option<f32>)>,
+    /// Radiance r,g,b of rays that leave the scene (default black, grey with the headlight).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    background: Option<Vec3>,
+    /// Multiply the radiance by this before tone mapping the PNG.
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Also write the linear image as OpenEXR (the output itself is EXR when it ends in .exr).
+    #[arg(long)]
+    exr: Option<PathBuf>,
+    /// List what the scene and options need and what the renderer skips, then render.
+    #[arg(long)]
+    explain: bool,
+    /// Do not skip what the scene does not need (to measure what skipping saves).
+    #[arg(long)]
+    no_skip: bool,
+    /// Also render without skipping and with the other --primary, each on a fresh
+    /// tracer (pipelines compiled anew), and print what each costs, in one run.
+    #[arg(long)]
+    compare: bool,
+    /// First hits: trace (camera rays) or raster (a visibility buffer drawn by a graphics pipeline).
+    #[arg(long, default_value = "trace")]
+    primary: String,
 }
 
 #[derive(clap::Args, Clone)]
@@ -280,6 +328,22 @@ fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
     }
 }
 
+fn parse_light(s: &str) -> std::result::Result<(Vec3, Option<f32>), String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    if parts.len() != 3 && parts.len() != 4 {
+        return Err(format!("expected x,y,z or x,y,z,intensity, got '{s}'"));
+    }
+    let position = parse_vec3(&parts[..3].join(","))?;
+    let intensity = match parts.get(3) {
+        None => None,
+        Some(p) => match p.trim().parse::<f32>() {
+            Ok(i) if i.is_finite() && i >= 0.0 => Some(i),
+            _ => return Err(format!("intensity '{p}' must be a finite number >= 0")),
+        },
+    };
+    Ok((position, intensity))
+}
+
 fn spinner(message: String) -> ProgressBar {
     let bar = ProgressBar::new_spinner().with_message(message);
     bar.enable_steady_tick(Duration::from_millis(120));
@@ -316,6 +380,14 @@ fn render(args: RenderArgs) -> Result<()> {
         Some(h @ ("nodes" | "triangles")) => Some(h.to_string()),
         Some(other) => bail!("unknown --heatmap '{other}' (nodes, triangles)"),
     };
+    let primary = match args.primary.as_str() {
+        "trace" => Primary::Trace,
+        "raster" => Primary::Raster,
+        other => bail!("unknown --primary '{other}' (trace, raster)"),
+    };
+    if !(args.exposure.is_finite() && args.exposure >= 0.0) {
+        bail!("--exposure must be a finite number >= 0");
+    }
     let (scene, tree) = load_and_build(&args.scene)?;
     let mut camera = default_camera(&args.scene, &scene)?;
     if let Some(eye) = args.eye {
@@ -340,46 +412,165 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     let ctx = context()?;
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    if let Some(kind) = &heatmap {
+        return render_heatmap(&args, &ctx, &mut tracer, &camera, traversal, kind);
+    }
+
+    let mut settings = RenderSettings::new(args.width, args.height);
+    settings.spp = args.spp;
+    settings.seed = args.seed;
+    settings.max_depth = args.max_depth;
+    settings.bounces = args.bounces;
+    settings.ao_samples = args.ao;
+    settings.ao_radius = args.ao_radius;
+    settings.ambient = args.ambient;
+    settings.background = args.background;
+    settings.traversal = traversal;
+    settings.skip_unneeded = !args.no_skip;
+    settings.primary = primary;
+    settings.lights = args
+        .light
+        .iter()
+        .map(|&(position, intensity)| {
+            let d2 = (scene.bounds.center() - position).length_squared().max(f32::MIN_POSITIVE);
+            PointLight { position, intensity: Vec3::splat(intensity.unwrap_or(std::f32::consts::PI * d2)) }
+        })
+        .collect();
+    if args.explain {
+        for line in RenderPlan::new(&scene, &settings)?.explain() {
+            eprintln!("  {line}");
+        }
+    }
+    let render_once = |tracer: &mut Tracer, settings: &RenderSettings| {
+        let bar = ProgressBar::new(u64::from(settings.spp));
+        bar.set_style(ProgressStyle::with_template("rendering {bar:40} {pos}/{len} sample passes {elapsed}").unwrap());
+        let out = kdtrace::render::render(tracer, &scene, &camera, settings, |done, total| {
+            bar.set_length(total);
+            bar.set_position(done);
+        });
+        bar.finish_and_clear();
+        out
+    };
+    let out = render_once(&mut tracer, &settings)?;
+    if args.compare {
+        compare_renders(&ctx, &tree, &scene, &settings, &out, render_once)?;
+    }
+
+    let is_exr = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if is_exr {
+        kdtrace::render::save_exr(&args.output, &out.pixels, out.width, out.height)?;
+    } else {
+        let image = kdtrace::render::tone_map(&out.pixels, out.width, out.height, args.exposure);
+        image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
+    }
+    if let Some(exr) = &args.exr {
+        kdtrace::render::save_exr(exr, &out.pixels, out.width, out.height)?;
+    }
+    let s = &out.stats;
+    eprint!(
+        "{}: {}x{}, {} spp on {}: {} camera + {} secondary + {} shadow rays",
+        args.output.display(),
+        out.width,
+        out.height,
+        args.spp,
+        ctx.info.name,
+        s.camera_rays,
+        s.secondary_rays,
+        s.shadow_rays
+    );
+    if let (Some(t), Some(sh)) = (s.trace_seconds, s.shade_seconds) {
+        eprint!(
+            "; GPU: trace {:.1} ms ({:.2} M rays/s), shade {:.1} ms",
+            t * 1e3,
+            s.traced_rays() as f64 / t.max(1e-12) / 1e6,
+            sh * 1e3
+        );
+    }
+    if let Some(r) = s.raster_seconds {
+        eprint!(", first hits rasterized {:.1} ms ({} edge ties)", r * 1e3, s.raster_edge_pixels);
+    }
+    eprintln!(
+        "; setup {:.0} ms, render {:.0} ms wall, {} submits",
+        s.setup_seconds * 1e3,
+        s.render_seconds * 1e3,
+        s.submits
+    );
+    Ok(())
+}
+
+/// `render --compare`: the render as asked, without skipping, and with the other
+/// kind of first hits, each on a fresh tracer; a table of their costs.
+fn compare_renders(
+    ctx: &std::sync::Arc<GpuContext>,
+    tree: &KdTree,
+    scene: &Scene,
+    settings: &RenderSettings,
+    first: &kdtrace::render::RenderOutput,
+    render_once: impl Fn(&mut Tracer, &RenderSettings) -> kdtrace::Result<kdtrace::render::RenderOutput>,
+) -> Result<()> {
+    let mut variants = vec![("as asked".to_string(), settings.clone())];
+    if settings.skip_unneeded {
+        variants.push(("--no-skip".into(), RenderSettings { skip_unneeded: false, ..settings.clone() }));
+    }
+    let other = match settings.primary {
+        Primary::Trace => ("--primary raster", Primary::Raster),
+        Primary::Raster => ("--primary trace", Primary::Trace),
+    };
+    variants.push((other.0.into(), RenderSettings { primary: other.1, ..settings.clone() }));
+    let mean = first.pixels.iter().map(|p| f64::from(p.element_sum())).sum::<f64>() / (3 * first.pixels.len()) as f64;
+    let ms = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{:.1}", s * 1e3));
+    eprintln!(
+        "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>8}",
+        "variant", "setup ms", "trace ms", "shade ms", "raster ms", "wall ms", "rays", "RMSE"
+    );
+    for (name, variant) in &variants {
+        // A fresh tracer, so that the variant compiles its own pipelines.
+        let mut tracer = Tracer::new(ctx, tree, &scene.triangles)?;
+        let out = render_once(&mut tracer, variant)?;
+        let s = &out.stats;
+        let sq =
+            out.pixels.iter().zip(&first.pixels).map(|(a, b)| f64::from((*a - *b).length_squared()) / 3.0).sum::<f64>();
+        let rmse = (sq / out.pixels.len() as f64).sqrt() / mean.max(f64::MIN_POSITIVE);
+        eprintln!(
+            "{:<18} {:>9.1} {:>9} {:>9} {:>9} {:>9.1} {:>11} {:>7.2}%",
+            name,
+            s.setup_seconds * 1e3,
+            ms(s.trace_seconds),
+            ms(s.shade_seconds),
+            ms(s.raster_seconds),
+            (s.setup_seconds + s.render_seconds) * 1e3,
+            s.rays(),
+            rmse * 100.0
+        );
+    }
+    eprintln!("(RMSE: of each variant's image against the first variant's, relative to its mean; the first variant ran twice)");
+    Ok(())
+}
+
+/// `render --heatmap`: the per-pixel node visits or triangle tests of camera rays.
+fn render_heatmap(
+    args: &RenderArgs,
+    ctx: &GpuContext,
+    tracer: &mut Tracer,
+    camera: &Camera,
+    traversal: Traversal,
+    kind: &str,
+) -> Result<()> {
     // Morton order: every aligned run of 4^k rays is a square tile, so packets hold neighbours.
-    let (rays, pixels) = kdtrace::render::camera_rays_morton(&camera, args.width, args.height);
+    let (rays, pixels) = kdtrace::render::camera_rays_morton(camera, args.width, args.height);
     let bar = trace_bar(rays.len());
-    let options = TraceOptions { traversal, counters: heatmap.is_some() };
+    let options = TraceOptions { traversal, counters: true };
     let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
-    let image = match (&heatmap, &result.counters) {
-        (Some(kind), Some(counters)) => {
-            let mut values = vec![0u32; pixels.len()];
-            for (c, &p) in counters.iter().zip(&pixels) {
-                values[p as usize] = if kind == "nodes" { c.nodes } else { c.triangles };
-            }
-            let (image, max, mean) = kdtrace::render::heatmap(&values, args.width, args.height);
-            eprintln!("heatmap of {kind} per ray ({}): mean {mean:.1}, max {max}", traversal.variant);
-            image
-        }
-        _ => {
-            let shaded = kdtrace::render::shade_headlight(&scene, &rays, &result.hits);
-            let mut colors = vec![Vec3::ZERO; pixels.len()];
-            for (c, &p) in shaded.iter().zip(&pixels) {
-                colors[p as usize] = *c;
-            }
-            kdtrace::render::to_image(&colors, args.width, args.height)
-        }
-    };
-    image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
-    let hits = result.hits.iter().filter(|h| h.is_hit()).count();
-    eprint!(
-        "{}: {}x{} on {}, {} of {} pixels hit",
-        args.output.display(),
-        args.width,
-        args.height,
-        ctx.info.name,
-        hits,
-        rays.len()
-    );
-    if let Some(s) = result.gpu_seconds {
-        eprint!(", trace {:.2} ms ({:.2} M rays/s)", s * 1e3, rays.len() as f64 / s / 1e6);
+    let counters = result.counters.context("the tracer returned no counters")?;
+    let mut values = vec![0u32; pixels.len()];
+    for (c, &p) in counters.iter().zip(&pixels) {
+        values[p as usize] = if kind == "nodes" { c.nodes } else { c.triangles };
     }
-    eprintln!();
+    let (image, max, mean) = kdtrace::render::heatmap(&values, args.width, args.height);
+    eprintln!("heatmap of {kind} per ray ({}): mean {mean:.1}, max {max}", traversal.variant);
+    image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
+    eprintln!("{}: {}x{} on {}", args.output.display(), args.width, args.height, ctx.info.name);
     Ok(())
 }
 

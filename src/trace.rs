@@ -152,6 +152,8 @@ struct SceneBuffers {
     prim_indices: Buffer,
     triangles: Buffer,
     bounds: Aabb,
+    /// Triangles of the scene.
+    triangle_count: usize,
     /// The nodes, kept to build the side buffers if a variant needs them.
     host_nodes: Vec<KdNode>,
     /// Parent links, node boxes and ropes, uploaded on first use by `backtrack`/`ropes`.
@@ -201,6 +203,7 @@ impl SceneBuffers {
             prim_indices: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,
             triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&tri_texels), texel_usage, "triangle texels")?,
             bounds: tree.bounds,
+            triangle_count: triangles.len(),
             host_nodes: tree.nodes.clone(),
             links: None,
         })
@@ -305,6 +308,11 @@ impl Tracer {
     /// The box around the scene's triangles (rays are clipped to it).
     pub fn bounds(&self) -> Aabb {
         self.scene.bounds
+    }
+
+    /// Triangles of the scene this tracer holds.
+    pub fn triangle_count(&self) -> usize {
+        self.scene.triangle_count
     }
 
     /// Rays traced per dispatch.

@@ -1,14 +1,16 @@
 //! The only module that calls Vulkan: the device context (headless, or adopted
-//! from an engine), buffers, kernels, timestamps. Every `unsafe` block carries a
+//! from an engine), buffers, kernels, timestamps, and the rasterizer of first hits. Every `unsafe` block carries a
 //! `// SAFETY:` line.
 mod buffer;
 mod context;
 mod kernel;
+mod raster;
 
 pub use buffer::{Buffer, BufferRange};
 pub use context::{list_devices, required_features, AdoptDesc, ContextOptions, DeviceInfo, GpuContext, Validation};
 pub(crate) use kernel::check_range;
 pub use kernel::{BufferSet, Kernel, KernelDesc, Timestamps};
+pub use raster::{RasterView, Rasterizer};
 
 /// SPIR-V of the kernels in `glsl/`, compiled by build.rs, and the GLSL header
 /// for shader authors.

@@ -71,6 +71,19 @@ impl Camera {
         (self.eye, dir.as_vec3())
     }
 
+    /// The pinhole model of [`Camera::ray`] as four vectors, for shaders: the ray
+    /// through image point `(px, py)` has direction
+    /// `forward + sx · right + sy · up` with `sx = 2·px/width − 1` and
+    /// `sy = 1 − 2·py/height`, normalized. Returns `[eye, forward, right, up]`,
+    /// `right` and `up` scaled by the field of view and aspect ratio.
+    pub fn pinhole(&self, width: u32, height: u32) -> [Vec3; 4] {
+        let (forward, right, up) = self.basis();
+        let (w, h) = (f64::from(width.max(1)), f64::from(height.max(1)));
+        let fov = if self.fov_deg.is_finite() { f64::from(self.fov_deg).clamp(1e-3, 179.0) } else { 40.0 };
+        let tan = (0.5 * fov.to_radians()).tan();
+        [self.eye, forward.as_vec3(), (right * tan * (w / h)).as_vec3(), (up * tan).as_vec3()]
+    }
+
     /// Orthonormal forward, right and up vectors (f64, so that far-apart eye and
     /// target do not overflow). A degenerate camera (eye = target, up parallel
     /// to the view or zero) still gets a basis.

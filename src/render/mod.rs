@@ -1,8 +1,16 @@
-//! Primary-ray rendering: camera rays in, a shaded image out. Shading is a
-//! headlight (a light at the eye) on the MTL diffuse colour; later passes add
-//! shadows, mirrors and diffuse bounces.
+//! Rendering: the wavefront renderer ([`render`]: shadows, mirrors, ambient
+//! occlusion, path-traced diffuse light, all passes on the device), camera rays,
+//! tone mapping and image output (PNG, linear EXR), and cost heatmaps.
+
+mod wavefront;
+
+use std::path::Path;
 
 use glam::Vec3;
+
+pub use wavefront::{
+    ld2, render, PointLight, Primary, RenderOutput, RenderParams, RenderPlan, RenderSettings, RenderStats, MAX_LIGHTS,
+};
 
 use crate::geom::{Hit, Ray};
 use crate::scene::{Camera, Scene};
@@ -23,18 +31,29 @@ pub fn camera_rays(camera: &Camera, width: u32, height: u32) -> Vec<Ray> {
 /// index of each ray. Every aligned run of 4^k rays covers a 2^k × 2^k tile (and
 /// 2·4^k a 2:1 one), so a packet of consecutive lanes holds neighbouring pixels.
 pub fn camera_rays_morton(camera: &Camera, width: u32, height: u32) -> (Vec<Ray>, Vec<u32>) {
+    let pixels = morton_pixels(width, height);
+    let rays = pixels
+        .iter()
+        .map(|&p| {
+            let (x, y) = (p % width, p / width);
+            let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
+            Ray::new(origin, dir, 0.0, f32::INFINITY)
+        })
+        .collect();
+    (rays, pixels)
+}
+
+/// The row-major index of every pixel, in Morton (Z) order over the image.
+pub fn morton_pixels(width: u32, height: u32) -> Vec<u32> {
     let side = width.max(height).next_power_of_two() as u64;
-    let mut rays = Vec::with_capacity(width as usize * height as usize);
-    let mut pixels = Vec::with_capacity(rays.capacity());
+    let mut pixels = Vec::with_capacity(width as usize * height as usize);
     for code in 0..side * side {
         let (x, y) = morton_decode(code);
         if x < width && y < height {
-            let (origin, dir) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, width, height);
-            rays.push(Ray::new(origin, dir, 0.0, f32::INFINITY));
             pixels.push(y * width + x);
         }
     }
-    (rays, pixels)
+    pixels
 }
 
 /// The (x, y) of a 2D Morton code (x in the even bits).
@@ -83,6 +102,31 @@ pub fn shade_headlight(scene: &Scene, rays: &[Ray], hits: &[Hit]) -> Vec<Vec3> {
         .collect()
 }
 
+/// Tone maps linear radiance for display: scaled by `exposure`, then clamped to
+/// [0, 1] and sRGB-encoded (see [`to_image`]).
+pub fn tone_map(colors: &[Vec3], width: u32, height: u32, exposure: f32) -> image::RgbImage {
+    let scaled: Vec<Vec3> = colors.iter().map(|c| *c * exposure).collect();
+    to_image(&scaled, width, height)
+}
+
+/// Writes linear radiance as a 32-bit float RGB OpenEXR file.
+pub fn save_exr(path: &Path, colors: &[Vec3], width: u32, height: u32) -> crate::Result<()> {
+    let data: Vec<f32> = colors.iter().flat_map(|c| c.to_array()).collect();
+    let image = image::Rgb32FImage::from_raw(width, height, data)
+        .ok_or_else(|| crate::Error::InvalidInput(format!("{} colours for a {width}x{height} image", colors.len())))?;
+    image.save(path).map_err(|e| crate::Error::InvalidInput(format!("writing {}: {e}", path.display())))
+}
+
+/// Reads a float RGB image (OpenEXR, or any format the `image` crate reads) as
+/// linear colours, with its width and height.
+pub fn load_linear(path: &Path) -> crate::Result<(Vec<Vec3>, u32, u32)> {
+    let image = image::open(path)
+        .map_err(|e| crate::Error::InvalidInput(format!("reading {}: {e}", path.display())))?
+        .into_rgb32f();
+    let (w, h) = image.dimensions();
+    Ok((image.pixels().map(|p| Vec3::new(p[0], p[1], p[2])).collect(), w, h))
+}
+
 /// sRGB-encodes linear colours into an 8-bit RGB image.
 pub fn to_image(colors: &[Vec3], width: u32, height: u32) -> image::RgbImage {
     let encode = |c: f32| {
@@ -128,6 +172,11 @@ mod tests {
         let tile: Vec<(u32, u32)> = pixels[..16].iter().map(|p| (p % 37, p / 37)).collect();
         assert!(tile.iter().all(|&(x, y)| x < 4 && y < 4));
         let row_major = camera_rays(&camera, 37, 21);
+        for (w, h) in [(1, 1), (1, 7), (9, 1), (64, 48), (48, 64), (100, 3)] {
+            let mut p = morton_pixels(w, h);
+            p.sort_unstable();
+            assert!(p.iter().copied().eq(0..w * h), "{w}x{h}");
+        }
         for (ray, &p) in rays.iter().zip(&pixels) {
             assert_eq!(*ray, row_major[p as usize]);
         }

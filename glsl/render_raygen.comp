@@ -1,0 +1,47 @@
+#version 450
+// Render pass 1: one camera ray per pixel for sample `sample_index`, jittered
+// inside the pixel by a scrambled Sobol sequence (the pixel centre when there is one sample
+// per pixel), in the order of `pixels` (Morton order, so packets hold neighbours).
+// See src/render/wavefront.rs.
+
+#extension GL_GOOGLE_include_directive : require
+
+#include "ray.glsl"
+#include "render.glsl"
+
+layout(local_size_x = 64) in;
+
+// 0: pixel centres; 1: a jitter per pixel and sample; 2: one jitter per sample
+// for the whole image (what a rasterized first hit can follow).
+layout(constant_id = 0) const uint JITTER = 1u;
+
+layout(std430, set = 0, binding = 0) readonly buffer Pixels { uint pixels[]; };
+layout(std430, set = 0, binding = 1) writeonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = 2) writeonly buffer Paths { Path paths[]; };
+
+layout(push_constant) uniform Params { RenderParams p; };
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= p.count) return;
+    uint pixel = pixels[floatBitsToUint(p.eye.w) + i];   // eye.w: this chunk's first pixel
+    uint x = pixel % p.width;
+    uint y = pixel / p.width;
+    vec2 jitter = JITTER == 0u ? vec2(0.5) : ld2(JITTER == 1u ? pixel : 0u, p.sample_index, 0u, p.seed);
+    float sx = 2.0 * (float(x) + jitter.x) / float(p.width) - 1.0;
+    float sy = 1.0 - 2.0 * (float(y) + jitter.y) / float(p.height);
+    Ray ray;
+    ray.origin = p.eye.xyz;
+    ray.tmin = 0.0;
+    ray.dir = normalize(p.forward.xyz + sx * p.right.xyz + sy * p.up.xyz);
+    ray.tmax = uintBitsToFloat(0x7f800000u);
+    rays[i] = ray;
+    Path path;
+    path.throughput = vec3(1.0);
+    path.pixel = pixel;
+    path.flags = PATH_COUNT_EMISSION;
+    path.depth = 0u;
+    path.diffuse = 0u;
+    path.pad = 0u;
+    paths[i] = path;
+}

@@ -1,0 +1,239 @@
+#version 450
+// Render pass 2: shades the closest hits of a ray queue. For each path it adds
+// what it sees directly (emission, background, the headlight) to its pixel,
+// appends its shadow rays (point lights, one area-light sample, ambient
+// occlusion) with the radiance each would bring if unoccluded, and appends the
+// path's next ray (mirror reflection or cosine-weighted diffuse bounce) to the
+// next queue. Appending by atomic counter compacts the queues: finished paths
+// take no slot. What the scene and options do not need is switched off by the
+// specialization constants below, so the driver removes that code.
+// See src/render/wavefront.rs.
+
+#extension GL_GOOGLE_include_directive : require
+
+#include "ray.glsl"
+#include "render.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(constant_id = 0) const bool HEADLIGHT = false;    // eye light, no shadow rays
+layout(constant_id = 1) const bool POINT_LIGHTS = true;  // --light
+layout(constant_id = 2) const bool AREA_LIGHTS = true;   // emissive triangles (Ke)
+layout(constant_id = 3) const bool MIRRORS = true;       // illum 3 materials
+layout(constant_id = 4) const bool GLOSSY = true;        // illum 2 highlights
+layout(constant_id = 5) const bool AO = true;            // --ao N
+layout(constant_id = 6) const bool BOUNCES = true;       // --bounces N
+layout(constant_id = 7) const bool CONTINUE = true;      // a next queue exists
+layout(constant_id = 8) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
+
+layout(std430, set = 0, binding = 0) readonly buffer Surfaces { Surface surfaces[]; };
+layout(std430, set = 0, binding = 1) readonly buffer Materials { Material materials[]; };
+layout(std430, set = 0, binding = 2) readonly buffer Emitters { Emitter emitters[]; };
+layout(std430, set = 0, binding = 3) readonly buffer Lights { PointLight lights[]; };
+layout(std430, set = 0, binding = 4) readonly buffer RaysIn { Ray rays_in[]; };
+layout(std430, set = 0, binding = 5) readonly buffer PathsIn { Path paths_in[]; };
+layout(std430, set = 0, binding = 6) readonly buffer HitsIn { Hit hits_in[]; };
+layout(std430, set = 0, binding = 7) writeonly buffer RaysNext { Ray rays_next[]; };
+layout(std430, set = 0, binding = 8) writeonly buffer PathsNext { Path paths_next[]; };
+layout(std430, set = 0, binding = 9) writeonly buffer ShadowRays { Ray shadow_rays[]; };
+layout(std430, set = 0, binding = 10) writeonly buffer ShadowWeights { vec4 shadow_weights[]; };
+layout(std430, set = 0, binding = 11) writeonly buffer Spans { uvec2 spans[]; };
+layout(std430, set = 0, binding = 12) buffer Counters { uint counters[]; };
+layout(std430, set = 0, binding = 13) buffer Accum { vec4 accum[]; };
+
+layout(push_constant) uniform Params { RenderParams p; };
+
+const float PI = 3.14159265358979;
+#define INF uintBitsToFloat(0x7f800000u)
+
+// The emitter whose cumulative probability first exceeds u (binary search).
+uint pick_emitter(float u) {
+    uint lo = 0u;
+    uint hi = p.emitter_count - 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        if (emitters[mid].cdf > u) hi = mid; else lo = mid + 1u;
+    }
+    return lo;
+}
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= p.count) return;
+    Path path = paths_in[i];
+    Hit hit = hits_in[i];
+    spans[i] = uvec2(0u);
+
+    if (hit.prim_id >= PRIM_INCOMPLETE) {
+        if (hit.prim_id == PRIM_MISS) {
+            accum[path.pixel] += vec4(path.throughput * p.background.xyz, 0.0);
+        } else {
+            atomicAdd(counters[RC_BAD_RAYS], 1u);
+        }
+        return;
+    }
+
+    Surface s = surfaces[hit.prim_id];
+    Material m = materials[floatBitsToUint(s.v0.w)];
+    uint mat = floatBitsToUint(m.ks.w);
+    vec3 wo = -normalize(rays_in[i].dir);
+    vec3 ng = normalize(cross(s.v1.xyz - s.v0.xyz, s.v2.xyz - s.v0.xyz));
+    vec3 n = dot(ng, wo) < 0.0 ? -ng : ng;   // the side the ray arrived from
+    float b0 = 1.0 - hit.u - hit.v;
+    vec3 x = b0 * s.v0.xyz + hit.u * s.v1.xyz + hit.v * s.v2.xyz;
+    vec3 scale = triangle_scale(s.v0.xyz, s.v1.xyz, s.v2.xyz);
+    vec3 origin = offset_origin(x, n, scale);
+    vec3 thr = path.throughput;
+    bool diffuse = (mat & MAT_DIFFUSE) != 0u;
+    bool glossy = GLOSSY && (mat & MAT_GLOSSY) != 0u;
+    bool mirror = MIRRORS && (mat & MAT_MIRROR) != 0u;
+    uint base = 1u + 4u * path.depth;   // this vertex's dimension pairs
+
+    // How the path goes on from here: a mirror reflection with probability
+    // p_mirror, else a diffuse bounce when allowed (probability bounce_share).
+    bool continues = CONTINUE && path.depth + 1u < p.max_depth;
+    bool can_bounce = continues && BOUNCES && !HEADLIGHT && diffuse && path.diffuse < p.bounces;
+    float p_mirror = 0.0;
+    if (mirror && continues) {
+        float lm = luminance(m.ks.xyz);
+        float ld = can_bounce ? luminance(m.kd.xyz) : 0.0;
+        p_mirror = lm + ld > 0.0 ? lm / (lm + ld) : 0.0;
+    }
+    float bounce_share = can_bounce ? 1.0 - p_mirror : 0.0;
+
+    vec3 L = vec3(0.0);
+    if ((mat & MAT_EMISSIVE) != 0u) {
+        if ((path.flags & PATH_COUNT_EMISSION) != 0u) {
+            L += thr * m.ke.xyz;
+        } else if (AREA_LIGHTS && (path.flags & PATH_MIS) != 0u) {
+            // A diffuse bounce found an emitter that next-event estimation could
+            // also have sampled: the power heuristic (Veach 1997) weighs the two.
+            float d = hit.t * length(rays_in[i].dir);
+            float cos_y = max(abs(dot(ng, wo)), 1e-12);
+            float p_light = max(luminance(m.ke.xyz), 1e-6) / p.forward.w * d * d / cos_y;
+            float p_bsdf = uintBitsToFloat(path.pad);
+            L += thr * m.ke.xyz * (p_bsdf * p_bsdf / (p_bsdf * p_bsdf + p_light * p_light));
+        }
+    }
+    // The eye light shades without shadows. At a camera hit the camera ray
+    // proves the eye sees x; HEADLIGHT_SHADOWS traces that visibility anyway
+    // (--no-skip), to measure what skipping it saves.
+    vec3 head = (HEADLIGHT && diffuse) ? thr * m.kd.xyz * (0.1 + 0.9 * max(dot(n, wo), 0.0)) : vec3(0.0);
+    bool head_ray = HEADLIGHT && HEADLIGHT_SHADOWS && path.depth == 0u && luminance(head) > 0.0;
+    if (HEADLIGHT && !head_ray) L += head;
+
+    // Shadow rays: count them, reserve a contiguous span, then write them.
+    uint shadow_count = 0u;
+    bool lit = !HEADLIGHT && (diffuse || glossy);
+    vec3 area_weight = vec3(0.0);
+    vec3 area_target = vec3(0.0);
+    if (AREA_LIGHTS && lit && p.emitter_count > 0u) {
+        vec2 u = ld2(path.pixel, p.sample_index, base, p.seed);
+        vec2 v = ld2(path.pixel, p.sample_index, base + 1u, p.seed);
+        Emitter e = emitters[pick_emitter(u.x)];
+        Surface es = surfaces[e.prim];
+        float su = sqrt(v.x);
+        float c0 = 1.0 - su;
+        float c1 = v.y * su;
+        vec3 y = c0 * es.v0.xyz + c1 * es.v1.xyz + (1.0 - c0 - c1) * es.v2.xyz;
+        vec3 ny = normalize(cross(es.v1.xyz - es.v0.xyz, es.v2.xyz - es.v0.xyz));
+        vec3 d = y - x;
+        float dist2 = dot(d, d);
+        vec3 wi = d * inversesqrt(dist2);
+        float cos_x = dot(n, wi);
+        float cos_y = abs(dot(ny, wi));
+        if (dist2 > 0.0 && cos_x > 0.0 && cos_y > 0.0 && e.pick > 0.0) {
+            vec3 f = diffuse ? m.kd.xyz / PI : vec3(0.0);
+            if (glossy) f += m.ks.xyz * ((m.kd.w + 2.0) / (2.0 * PI)) * pow(max(dot(reflect(-wi, n), wo), 0.0), m.kd.w);
+            vec3 ke = materials[floatBitsToUint(es.v0.w)].ke.xyz;
+            // The power heuristic against the diffuse bounce's cosine sampling,
+            // when this vertex bounces (else the light sample takes it all).
+            float p_light = e.pick / e.area * dist2 / cos_y;
+            float p_bsdf = bounce_share * cos_x / PI;
+            float mis = p_light * p_light / (p_light * p_light + p_bsdf * p_bsdf);
+            area_weight = thr * f * ke * (cos_x * cos_y / dist2) * (e.area / e.pick) * mis;
+            vec3 escale = triangle_scale(es.v0.xyz, es.v1.xyz, es.v2.xyz);
+            area_target = offset_origin(y, dot(ny, wi) > 0.0 ? -ny : ny, escale);
+            if (luminance(area_weight) > 0.0) shadow_count++;
+        }
+    }
+    if (POINT_LIGHTS && lit) {
+        for (uint l = 0u; l < p.light_count; l++) {
+            if (dot(n, lights[l].position.xyz - x) > 0.0) shadow_count++;
+        }
+    }
+    bool gather_ao = AO && diffuse && !HEADLIGHT && (path.flags & PATH_AO_DONE) == 0u;
+    if (gather_ao) shadow_count += p.ao_samples;
+    if (head_ray) shadow_count++;
+
+    if (shadow_count > 0u) {
+        uint first = atomicAdd(counters[RC_SHADOW], shadow_count);
+        if (first + shadow_count > p.shadow_capacity) {
+            atomicAdd(counters[RC_OVERFLOW], shadow_count);
+        } else {
+            spans[i] = uvec2(first, shadow_count);
+            uint k = first;
+            if (luminance(area_weight) > 0.0) {
+                shadow_rays[k] = Ray(origin, 0.0, area_target - origin, 1.0);
+                shadow_weights[k] = vec4(area_weight, 0.0);
+                k++;
+            }
+            if (POINT_LIGHTS && lit) {
+                for (uint l = 0u; l < p.light_count; l++) {
+                    vec3 d = lights[l].position.xyz - x;
+                    if (dot(n, d) <= 0.0) continue;
+                    float dist2 = dot(d, d);
+                    vec3 wi = d * inversesqrt(dist2);
+                    vec3 f = diffuse ? m.kd.xyz / PI : vec3(0.0);
+                    if (glossy) f += m.ks.xyz * ((m.kd.w + 2.0) / (2.0 * PI)) * pow(max(dot(reflect(-wi, n), wo), 0.0), m.kd.w);
+                    shadow_rays[k] = Ray(origin, 0.0, lights[l].position.xyz - origin, 1.0);
+                    shadow_weights[k] = vec4(thr * f * lights[l].intensity.xyz * (dot(n, wi) / dist2), 0.0);
+                    k++;
+                }
+            }
+            if (head_ray) {
+                shadow_rays[k] = Ray(origin, 0.0, p.eye.xyz - origin, 1.0);
+                shadow_weights[k] = vec4(head, 0.0);
+                k++;
+            }
+            if (gather_ao) {
+                vec3 weight = thr * m.kd.xyz * (p.background.w / float(p.ao_samples));
+                for (uint a = 0u; a < p.ao_samples; a++) {
+                    vec2 u = ld2(path.pixel, p.sample_index * p.ao_samples + a, base + 3u, p.seed);
+                    shadow_rays[k] = Ray(origin, 0.0, cosine_direction(n, u) * p.ao_radius, 1.0);
+                    shadow_weights[k] = vec4(weight, 0.0);
+                    k++;
+                }
+            }
+        }
+    }
+
+    // The path's next ray: a mirror reflection or a diffuse bounce.
+    if (continues) {
+        vec2 u = ld2(path.pixel, p.sample_index, base, p.seed);
+        Path next = path;
+        next.depth = path.depth + 1u;
+        vec3 dir = vec3(0.0);
+        bool go = false;
+        if (mirror && u.y < p_mirror) {
+            dir = reflect(-wo, n);
+            next.throughput = thr * m.ks.xyz / p_mirror;
+            next.flags = PATH_COUNT_EMISSION | (path.flags & PATH_AO_DONE) | (gather_ao ? PATH_AO_DONE : 0u);
+            go = true;
+        } else if (can_bounce) {
+            dir = cosine_direction(n, ld2(path.pixel, p.sample_index, base + 2u, p.seed));
+            next.throughput = thr * m.kd.xyz / bounce_share;
+            next.flags = PATH_AO_DONE | (AREA_LIGHTS ? PATH_MIS : 0u);
+            next.pad = floatBitsToUint(bounce_share * max(dot(n, dir), 0.0) / PI);
+            next.diffuse = path.diffuse + 1u;
+            go = true;
+        }
+        if (go && luminance(next.throughput) > 0.0) {
+            uint slot = atomicAdd(counters[RC_NEXT], 1u);
+            rays_next[slot] = Ray(origin, 0.0, dir, INF);
+            paths_next[slot] = next;
+        }
+    }
+
+    accum[path.pixel] += vec4(L, 0.0);
+}

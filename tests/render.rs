@@ -1,0 +1,557 @@
+//! The wavefront renderer on lavapipe, against analytic expectations and a
+//! reference image: the white furnace, a mirror reflecting a known pattern,
+//! direct light on planes at scales 1e-3 … 1e4 (no self-shadowing acne), a closed
+//! box with a light outside (no leaks), skipping that changes nothing but cost,
+//! and the Cornell box against a converged reference rendered by the project.
+
+mod common;
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::render::{render, PointLight, RenderOutput, RenderSettings};
+use kdtrace::scene::{Camera, Material, Scene};
+use kdtrace::trace::Tracer;
+use kdtrace::Hit;
+
+fn quad(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> [[Vec3; 3]; 2] {
+    [[a, b, c], [a, c, d]]
+}
+
+/// The 12 triangles of the box [lo, hi].
+fn cube(lo: Vec3, hi: Vec3) -> Vec<[Vec3; 3]> {
+    let p = |x: bool, y: bool, z: bool| {
+        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
+    };
+    let (f, t) = (false, true);
+    [
+        quad(p(f, f, f), p(t, f, f), p(t, t, f), p(f, t, f)),
+        quad(p(f, f, t), p(f, t, t), p(t, t, t), p(t, f, t)),
+        quad(p(f, f, f), p(f, t, f), p(f, t, t), p(f, f, t)),
+        quad(p(t, f, f), p(t, f, t), p(t, t, t), p(t, t, f)),
+        quad(p(f, f, f), p(f, f, t), p(t, f, t), p(t, f, f)),
+        quad(p(f, t, f), p(t, t, f), p(t, t, t), p(f, t, t)),
+    ]
+    .concat()
+}
+
+/// An icosphere of `radius` around the origin: the icosahedron subdivided
+/// `levels` times, vertices pushed onto the sphere.
+fn icosphere(radius: f32, levels: u32) -> Vec<[Vec3; 3]> {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let v = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .map(|(x, y, z)| Vec3::new(x, y, z).normalize());
+    let faces = [
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    let mut tris: Vec<[Vec3; 3]> = faces.iter().map(|f| f.map(|i| v[i])).collect();
+    for _ in 0..levels {
+        tris = tris
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let (ab, bc, ca) = ((a + b).normalize(), (b + c).normalize(), (c + a).normalize());
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    tris.iter().map(|t| t.map(|p| p * radius)).collect()
+}
+
+fn material(name: &str, kd: Vec3, ks: Vec3, illum: u32, ke: Vec3) -> Material {
+    Material { name: name.into(), kd, ks, ns: 0.0, illum, ke }
+}
+
+/// A scene of `triangles` with per-triangle `ids` into `materials`.
+fn scene_of(triangles: Vec<[Vec3; 3]>, ids: Vec<u32>, materials: Vec<Material>) -> Scene {
+    let mut scene = Scene::from_triangles(triangles).unwrap();
+    scene.material_ids = ids;
+    scene.materials = materials;
+    scene
+}
+
+fn render_scene(scene: &Scene, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
+    let ctx = common::context();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let out = render(&mut tracer, scene, camera, settings, |_, _| {}).unwrap();
+    drop(tracer);
+    common::assert_validation_clean(&ctx);
+    out
+}
+
+fn output_dir() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("render");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes `name-actual.png` (and `name-difference.png` against `expected`)
+/// for a failing image test, returning where they went.
+fn write_failure_images(name: &str, out: &RenderOutput, expected: Option<&[Vec3]>, exposure: f32) -> String {
+    let dir = output_dir();
+    let actual = dir.join(format!("{name}-actual.png"));
+    kdtrace::render::tone_map(&out.pixels, out.width, out.height, exposure).save(&actual).unwrap();
+    kdtrace::render::save_exr(&dir.join(format!("{name}-actual.exr")), &out.pixels, out.width, out.height).unwrap();
+    let mut written = actual.display().to_string();
+    if let Some(expected) = expected {
+        let diff: Vec<Vec3> = out.pixels.iter().zip(expected).map(|(a, e)| (*a - *e).abs()).collect();
+        let path = dir.join(format!("{name}-difference.png"));
+        kdtrace::render::tone_map(&diff, out.width, out.height, exposure * 4.0).save(&path).unwrap();
+        written += &format!(", {}", path.display());
+    }
+    written
+}
+
+#[test]
+fn white_furnace_every_pixel_has_the_known_radiance() {
+    // A closed sphere of albedo-1 diffuse emitters (Ke = E), seen from inside:
+    // each path vertex adds E by next-event estimation (the closed surface
+    // covers every direction), plus E seen directly, so with B bounces every
+    // pixel is (B + 2)·E. Albedo 0.5 gives E·(1 + 0.5 + … + 0.5^(B+1)). (A sphere:
+    // on a box, points near an edge see the next face at distance → 0, and the
+    // area-light estimate's variance has no bound.)
+    let e = 0.25;
+    let sphere = icosphere(1.0, 3);
+    for (albedo, bounces, expected) in [(1.0f32, 2u32, 4.0 * e), (0.5, 3, e * 1.9375), (1.0, 0, 2.0 * e)] {
+        let scene = scene_of(
+            sphere.clone(),
+            vec![0; sphere.len()],
+            vec![material("furnace", Vec3::splat(albedo), Vec3::ZERO, 1, Vec3::splat(e))],
+        );
+        let camera =
+            Camera { eye: Vec3::new(0.1, -0.2, 0.05), target: Vec3::new(1.0, 0.3, 0.4), up: Vec3::Y, fov_deg: 100.0 };
+        let mut settings = RenderSettings::new(16, 16);
+        settings.spp = 256;
+        settings.bounces = bounces;
+        let out = render_scene(&scene, &camera, &settings);
+        let mean = out.pixels.iter().map(|p| f64::from(p.x)).sum::<f64>() / out.pixels.len() as f64;
+        let worst = out.pixels.iter().map(|p| (p.x - expected).abs() / expected).fold(0.0f32, f32::max);
+        eprintln!(
+            "furnace albedo {albedo}, {bounces} bounces: mean {mean:.5} (expected {expected}), worst pixel {:.1} %",
+            worst * 100.0
+        );
+        let grey = out.pixels.iter().all(|p| p.x == p.y && p.y == p.z);
+        let message = format!(
+            "albedo {albedo}, {bounces} bounces: expected {expected}, mean {mean:.5}, worst pixel off by {:.1} % ({})",
+            worst * 100.0,
+            write_failure_images("furnace", &out, None, 0.5 / expected)
+        );
+        assert!(grey, "{message}: a grey furnace gave coloured pixels");
+        assert!((mean / f64::from(expected) - 1.0).abs() < 0.005, "{message}");
+        assert!(worst < 0.15, "{message}");
+        assert_eq!(out.stats.bad_rays, 0);
+        assert!(out.stats.shadow_rays > 0 && (bounces == 0) == (out.stats.secondary_rays == 0));
+    }
+}
+
+#[test]
+fn a_mirror_shows_the_pattern_it_faces() {
+    // A mirror (Ks 0.9, illum 3) in the plane z = 0 facing a camera at z = 3, and
+    // behind the camera an emissive checkerboard at z = 4 facing the mirror. Each
+    // pixel must show 0.9 × the Ke of the cell its reflected ray reaches, worked
+    // out here in f64: 1 sample per pixel through the pixel centre, no noise.
+    let mut tris = quad(
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(1.0, -1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.0),
+        Vec3::new(-1.0, 1.0, 0.0),
+    )
+    .to_vec();
+    let mut ids = vec![0, 0];
+    for i in -4..4 {
+        for j in -4..4 {
+            let (x, y) = (i as f32, j as f32);
+            tris.extend(quad(
+                Vec3::new(x, y, 4.0),
+                Vec3::new(x, y + 1.0, 4.0),
+                Vec3::new(x + 1.0, y + 1.0, 4.0),
+                Vec3::new(x + 1.0, y, 4.0),
+            ));
+            let cell = ((i + j) & 1) as u32 + 1;
+            ids.extend([cell, cell]);
+        }
+    }
+    let red = Vec3::new(2.0, 0.1, 0.0);
+    let blue = Vec3::new(0.0, 0.3, 1.5);
+    let scene = scene_of(
+        tris,
+        ids,
+        vec![
+            material("mirror", Vec3::ZERO, Vec3::splat(0.9), 3, Vec3::ZERO),
+            material("red", Vec3::ZERO, Vec3::ZERO, 1, red),
+            material("blue", Vec3::ZERO, Vec3::ZERO, 1, blue),
+        ],
+    );
+    let camera = Camera { eye: Vec3::new(0.2, 0.1, 3.0), target: Vec3::new(0.0, 0.0, 0.0), up: Vec3::Y, fov_deg: 45.0 };
+    let (w, h) = (64u32, 48u32);
+    let out = render_scene(&scene, &camera, &RenderSettings::new(w, h));
+
+    let mut expected = vec![Vec3::ZERO; (w * h) as usize];
+    let mut checked = 0;
+    let mut wrong = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (o, d) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, w, h);
+            let (o, d) = (o.as_dvec3(), d.as_dvec3());
+            let t = -o.z / d.z;
+            let m = o + d * t;
+            let i = (y * w + x) as usize;
+            if t <= 0.0 || m.x.abs() > 1.0 || m.y.abs() > 1.0 {
+                continue; // misses the mirror: background 0
+            }
+            let r = glam::DVec3::new(d.x, d.y, -d.z);
+            let s = (4.0 - m.z) / r.z;
+            let q = m + r * s;
+            let near_edge = |v: f64| (v - v.round()).abs() < 1e-3;
+            if near_edge(m.x.abs() - 1.0) || near_edge(q.x) || near_edge(q.y) {
+                expected[i] = out.pixels[i]; // a tie between cells: either is right
+                continue;
+            }
+            if q.x.abs() < 4.0 && q.y.abs() < 4.0 {
+                let cell = (q.x.floor() as i64 + q.y.floor() as i64) & 1;
+                expected[i] = 0.9 * if cell == 0 { red } else { blue };
+            }
+            checked += 1;
+        }
+    }
+    for (i, (a, e)) in out.pixels.iter().zip(&expected).enumerate() {
+        if (*a - *e).abs().max_element() > 1e-5 * e.max_element().max(1.0) {
+            wrong.push((i as u32 % w, i as u32 / w, *a, *e));
+        }
+    }
+    assert!(checked > (w * h / 4) as usize, "the mirror covers too little of the image ({checked} pixels)");
+    assert!(
+        wrong.is_empty(),
+        "{} pixels differ from the reflected pattern, e.g. {:?} ({})",
+        wrong.len(),
+        &wrong[..wrong.len().min(5)],
+        write_failure_images("mirror", &out, Some(&expected), 0.5)
+    );
+}
+
+/// A floor quad of `size` around `center` and a point light above it, seen
+/// from above; every floor pixel must carry the analytic direct light.
+fn lit_floor(center: Vec3, size: f32) -> (Scene, Camera, PointLight) {
+    let s = size;
+    let c = center;
+    let tris = quad(
+        c + Vec3::new(-s, 0.0, -s),
+        c + Vec3::new(-s, 0.0, s),
+        c + Vec3::new(s, 0.0, s),
+        c + Vec3::new(s, 0.0, -s),
+    )
+    .to_vec();
+    let scene = scene_of(tris, vec![0, 0], vec![material("floor", Vec3::splat(0.5), Vec3::ZERO, 1, Vec3::ZERO)]);
+    // A low light: grazing shadow rays are where acne shows first.
+    let light = PointLight { position: c + Vec3::new(1.5 * s, 0.05 * s, 0.2 * s), intensity: Vec3::splat(s * s) };
+    let camera = Camera { eye: c + Vec3::new(0.0, 1.2 * s, 0.3 * s), target: c, up: Vec3::Z, fov_deg: 60.0 };
+    (scene, camera, light)
+}
+
+#[test]
+fn no_self_shadowing_at_scales_from_1e_minus_3_to_1e4() {
+    for (center, size) in [
+        (Vec3::ZERO, 1.0),
+        (Vec3::new(3e-3, -2e-3, 1e-3), 1e-3),
+        (Vec3::new(1e4, 2e4, -3e4), 1e4),
+        (Vec3::new(5e4, 1e3, 7e4), 1.0),
+    ] {
+        let (scene, camera, light) = lit_floor(center, size);
+        let mut settings = RenderSettings::new(48, 48);
+        settings.lights = vec![light];
+        let out = render_scene(&scene, &camera, &settings);
+        let (w, h) = (settings.width, settings.height);
+        let mut lit = 0;
+        let mut dark = Vec::new();
+        let mut worst = 0.0f64;
+        for y in 0..h {
+            for x in 0..w {
+                let (o, d) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, w, h);
+                let (o, d) = (o.as_dvec3(), d.as_dvec3());
+                let t = (f64::from(center.y) - o.y) / d.y;
+                let p = o + d * t;
+                let local = (p - center.as_dvec3()) / f64::from(size);
+                if local.x.abs() > 0.99 || local.z.abs() > 0.99 {
+                    continue;
+                }
+                let to_light = light.position.as_dvec3() - p;
+                let cos = to_light.y / to_light.length();
+                let e = 0.5 / std::f64::consts::PI * f64::from(light.intensity.x) * cos / to_light.length_squared();
+                let got = f64::from(out.pixels[(y * w + x) as usize].x);
+                if got == 0.0 {
+                    dark.push((x, y));
+                }
+                worst = worst.max((got - e).abs() / e);
+                lit += 1;
+            }
+        }
+        assert!(lit > 500, "scale {size}: too few floor pixels ({lit})");
+        assert!(
+            dark.is_empty(),
+            "scale {size} at {center}: {} of {lit} floor pixels shadow themselves, e.g. {:?} ({})",
+            dark.len(),
+            &dark[..dark.len().min(5)],
+            write_failure_images("acne", &out, None, 1.0)
+        );
+        // Far from the origin the f32 coordinates themselves are coarse: the
+        // floor 5e4 away is placed to 0.004 units, 1/250 of its size.
+        let tolerance = if center.length() / size > 1e4 { 0.05 } else { 2e-3 };
+        assert!(worst < tolerance, "scale {size} at {center}: direct light off by {:.3} %", worst * 100.0);
+    }
+}
+
+#[test]
+fn no_light_leaks_into_a_closed_box_at_any_scale() {
+    // A closed box seen from inside, lit by a point light just outside its top
+    // face (one thousandth of the box away) and by an emissive triangle outside:
+    // no light may reach the inside.
+    for (center, size) in [(Vec3::ZERO, 1.0f32), (Vec3::splat(2e-3), 1e-3), (Vec3::new(3e4, -1e4, 2e4), 1e4)] {
+        let lo = center - Vec3::splat(size);
+        let hi = center + Vec3::splat(size);
+        let mut tris = cube(lo, hi);
+        let mut ids = vec![0; 12];
+        let top = hi.y + 0.01 * size;
+        tris.push([
+            Vec3::new(center.x - size, top, center.z - size),
+            Vec3::new(center.x + size, top, center.z - size),
+            Vec3::new(center.x, top, center.z + size),
+        ]);
+        ids.push(1);
+        let scene = scene_of(
+            tris,
+            ids,
+            vec![
+                material("wall", Vec3::splat(0.8), Vec3::ZERO, 1, Vec3::ZERO),
+                material("lamp", Vec3::ZERO, Vec3::ZERO, 1, Vec3::splat(50.0)),
+            ],
+        );
+        let camera = Camera {
+            eye: center + Vec3::new(0.2, -0.5, 0.1) * size,
+            target: center + Vec3::new(0.3, 1.0, 0.2) * size,
+            up: Vec3::Z,
+            fov_deg: 120.0,
+        };
+        let mut settings = RenderSettings::new(32, 32);
+        settings.spp = 4;
+        settings.bounces = 1;
+        settings.lights = vec![PointLight {
+            position: Vec3::new(center.x, hi.y + 1e-3 * size, center.z),
+            intensity: Vec3::splat(100.0 * size * size),
+        }];
+        let out = render_scene(&scene, &camera, &settings);
+        let leaks = out.pixels.iter().filter(|p| p.max_element() > 0.0).count();
+        assert!(out.stats.shadow_rays > 0);
+        assert_eq!(
+            leaks,
+            0,
+            "scale {size}: light leaked into {leaks} pixels ({})",
+            write_failure_images("leak", &out, None, 1.0)
+        );
+    }
+}
+
+#[test]
+fn skipping_what_the_scene_does_not_need_changes_only_the_cost() {
+    // The teapot has no lights, emitters or mirrors: a headlight render. Without
+    // skipping, every feature is compiled in and the headlight's visibility is
+    // traced; each of those shadow rays must find the eye unoccluded, so the
+    // images agree (up to the order of two additions).
+    let scene = Scene::load(&common::scene_path("teapot.obj")).unwrap();
+    let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "teapot").unwrap().unwrap();
+    let mut settings = RenderSettings::new(96, 72);
+    let skipped = render_scene(&scene, &camera, &settings);
+    settings.skip_unneeded = false;
+    let full = render_scene(&scene, &camera, &settings);
+    assert!(skipped.plan.headlight && !skipped.plan.shadow_pass && !skipped.plan.continue_paths);
+    assert_eq!(skipped.stats.shadow_rays, 0);
+    assert_eq!(skipped.stats.submits, 1, "a headlight render needs one submission per sample");
+    let hits = skipped.pixels.iter().filter(|p| **p != Vec3::splat(0.05)).count() as u64;
+    assert!(
+        full.stats.shadow_rays >= hits && hits > 1000,
+        "{} shadow rays for {hits} hit pixels",
+        full.stats.shadow_rays
+    );
+    let differ =
+        skipped.pixels.iter().zip(&full.pixels).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-6).count();
+    assert_eq!(differ, 0, "{differ} pixels differ between skipping and not skipping");
+    assert!(skipped.plan.explain().iter().any(|l| l.contains("any-hit pipeline is not compiled")));
+}
+
+/// The reference: `kdtrace render scenes/cornell_box.obj --width 64 --height 64
+/// --spp 4096 --bounces 2 --seed 7 -o tests/data/cornell_64_b2.exr`.
+#[test]
+fn the_cornell_box_matches_its_converged_reference() {
+    let reference_path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cornell_64_b2.exr");
+    let (reference, rw, rh) = kdtrace::render::load_linear(&reference_path).unwrap();
+    let path = common::scene_path("cornell_box.obj");
+    let scene = Scene::load(&path).unwrap();
+    let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let mut settings = RenderSettings::new(rw, rh);
+    settings.spp = 128;
+    settings.bounces = 2;
+    settings.seed = std::env::var("KDTRACE_TEST_SEED").map_or(1, |s| s.parse().unwrap());
+    let traced = render_scene(&scene, &camera, &settings);
+    settings.primary = kdtrace::render::Primary::Raster;
+    let rastered = render_scene(&scene, &camera, &settings);
+    for (primary, out) in [("traced", traced), ("rasterized", rastered)] {
+        // Compare 8x8 block means: the per-pixel noise of 128 samples (the mirror
+        // block's caustics above all) is too large for a per-pixel bound.
+        const B: u32 = 8;
+        let block = |img: &[Vec3], bx: u32, by: u32| {
+            let mut sum = Vec3::ZERO;
+            for y in by * B..by * B + B {
+                for x in bx * B..bx * B + B {
+                    sum += img[(y * rw + x) as usize];
+                }
+            }
+            sum / (B * B) as f32
+        };
+        let mean_ref = reference.iter().map(|p| p.element_sum() as f64).sum::<f64>() / (3 * reference.len()) as f64;
+        let compare = |image: &[Vec3]| {
+            let mut sq = 0.0f64;
+            let mut worst = 0.0f64;
+            for by in 0..rh / B {
+                for bx in 0..rw / B {
+                    let d = block(image, bx, by) - block(&reference, bx, by);
+                    sq += f64::from(d.length_squared()) / 3.0;
+                    worst = worst.max(f64::from(d.abs().max_element()) / mean_ref);
+                }
+            }
+            ((sq / f64::from(rw / B * rh / B)).sqrt() / mean_ref, worst)
+        };
+        let (rmse, worst) = compare(&out.pixels);
+        // The bound catches a 6 % bias: the same render made 6 % brighter fails it.
+        let brighter: Vec<Vec3> = out.pixels.iter().map(|p| *p * 1.06).collect();
+        assert!(compare(&brighter).0 > 0.04, "the comparison cannot see a 6 % bias");
+        eprintln!(
+            "cornell, {primary} first hits: relative block RMSE {:.2} %, worst block {:.1} %",
+            rmse * 100.0,
+            worst * 100.0
+        );
+        let message = format!(
+            "{primary} first hits: relative block RMSE {:.2} %, worst block {:.1} % ({})",
+            rmse * 100.0,
+            worst * 100.0,
+            write_failure_images("cornell", &out, Some(&reference), 1.0)
+        );
+        // Measured at 128 samples with seeds 1, 2, 3: RMSE 1.9–2.7 %, worst block 15–19 %.
+        assert!(rmse < 0.04, "{message}");
+        assert!(worst < 0.3, "{message}");
+    }
+}
+
+/// How far outside its triangle the ray o + t·d passes (0 when inside), in
+/// world units at the plane hit, and that hit's t (f64).
+fn outside_distance(tri: &[Vec3; 3], o: Vec3, d: Vec3) -> (f64, f64) {
+    let [a, b, c] = tri.map(|v| v.as_dvec3());
+    let (o, d) = (o.as_dvec3(), d.as_dvec3());
+    let (e1, e2) = (b - a, c - a);
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    let s = o - a;
+    let u = s.dot(p) / det;
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    let t = e2.dot(q) / det;
+    let bary = [1.0 - u - v, u, v];
+    let (k, &lambda) = bary.iter().enumerate().min_by(|x, y| x.1.total_cmp(y.1)).unwrap();
+    if lambda >= 0.0 {
+        return (0.0, t);
+    }
+    // The barycentric deficit times vertex k's height over the opposite edge.
+    let [pa, pb] = [[b, c], [c, a], [a, b]][k];
+    let twice_area = e1.cross(e2).length();
+    (-lambda * twice_area / (pb - pa).length(), t)
+}
+
+#[test]
+fn rasterized_first_hits_agree_with_traced_ones() {
+    // The same camera rays' first hits, traced and rasterized: the same triangle
+    // on every pixel but edge ties (a pixel centre on a shared edge, where the
+    // rasterizer's fill rule and the ray test may pick different neighbours, or a
+    // silhouette the two decide differently), and the same t, u, v where the
+    // triangle is the same (both use the watertight test on that triangle).
+    for (name, w, h) in [("teapot", 160u32, 120u32), ("cornell_box", 128, 128), ("q3_20kdm2", 160, 120)] {
+        let scene = Scene::load(&common::scene_path(&format!("{name}.obj"))).unwrap();
+        let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), name).unwrap().unwrap();
+        let mut settings = RenderSettings::new(w, h);
+        settings.keep_first_hits = true;
+        let traced = render_scene(&scene, &camera, &settings);
+        settings.primary = kdtrace::render::Primary::Raster;
+        let rastered = render_scene(&scene, &camera, &settings);
+        let (a, b) = (traced.first_hits.unwrap(), rastered.first_hits.unwrap());
+        let mut ties = 0;
+        let mut far_apart: Vec<(usize, Hit, Hit, f64)> = Vec::new();
+        for (i, (ta, rb)) in a.iter().zip(&b).enumerate() {
+            if ta.prim_id == rb.prim_id {
+                assert!(
+                    ta.t == rb.t && ta.u == rb.u && ta.v == rb.v || rastered.stats.raster_edge_pixels > 0,
+                    "{name}: pixel {i}: {ta:?} vs {rb:?}"
+                );
+                continue;
+            }
+            ties += 1;
+            // A tie is only a tie if both answers are (nearly) equally near:
+            // a wrong occlusion would put them far apart.
+            // Unless the nearer one lies on its triangle's edge: then the ray
+            // grazes that edge and passes either in front or behind it.
+            let (p, q) = (ta.is_hit(), rb.is_hit());
+            if p && q && (ta.t - rb.t).abs() > 1e-3 * ta.t.max(rb.t) {
+                let nearer = if ta.t < rb.t { ta } else { rb };
+                let (x, y) = (i as u32 % w, i as u32 / w);
+                let (o, d) = camera.ray(x as f32 + 0.5, y as f32 + 0.5, w, h);
+                let (outside, t) = outside_distance(&scene.triangles[nearer.prim_id as usize], o, d);
+                // One pixel spans t·2·tan(fov/2)/h there; rasterizers snap edges
+                // to a sub-pixel grid (1/256 pixel is common), so allow 1/20 pixel.
+                let pixel = t * 2.0 * (f64::from(camera.fov_deg).to_radians() / 2.0).tan() / f64::from(h);
+                if outside > 0.05 * pixel {
+                    far_apart.push((i, *ta, *rb, outside / pixel));
+                }
+            }
+        }
+        let total = a.len();
+        eprintln!(
+            "{name}: {ties} of {total} pixels differ (edge ties), {} rasterized hits just outside their triangle; \
+             first hits: trace {:.1} ms, raster {:.1} ms",
+            rastered.stats.raster_edge_pixels,
+            traced.stats.trace_seconds.unwrap_or(0.0) * 1e3,
+            rastered.stats.raster_seconds.unwrap_or(0.0) * 1e3
+        );
+        assert!(ties * 200 <= total, "{name}: {ties} of {total} pixels differ");
+        assert!(far_apart.is_empty(), "{name}: hits far apart: {:?}", &far_apart[..far_apart.len().min(5)]);
+        assert_eq!(rastered.stats.secondary_rays, traced.stats.secondary_rays.min(rastered.stats.secondary_rays));
+    }
+}
