@@ -486,8 +486,12 @@ fn render(args: RenderArgs) -> Result<()> {
             sh * 1e3
         );
     }
-    if let Some(r) = s.raster_seconds {
-        eprint!(", first hits rasterized {:.1} ms ({} edge ties)", r * 1e3, s.raster_edge_pixels);
+    if s.rasterized {
+        let time = s.raster_seconds.map_or(String::new(), |r| format!(" in {:.1} ms", r * 1e3));
+        eprint!("; first hits rasterized{time} ({} edge ties)", s.raster_edge_pixels);
+    }
+    if s.trace_seconds.is_none() {
+        eprint!("; no GPU times (timestamps missing or implausible on this device)");
     }
     eprintln!(
         "; setup {:.0} ms, render {:.0} ms wall, {} submits",
