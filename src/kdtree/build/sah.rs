@@ -693,6 +693,36 @@ fn flatten(part: Part, nodes: &mut Vec<KdNode>, prims: &mut Vec<u32>) {
     }
 }
 
+/// Event lists at least this long are radix-sorted.
+const RADIX_SORT_EVENTS: usize = 4096;
+
+/// Sorts events made in triangle order. A stable radix sort (least
+/// significant digit first, three passes of 12 bits) on the position and type
+/// only: events of equal position and type stay in triangle order, so the
+/// result is the one of sorting the whole u64s.
+fn radix_sort_events(events: &mut Vec<u64>) {
+    const DIGIT_BITS: u32 = 12;
+    let mut sorted = vec![0u64; events.len()];
+    for pass in 0..3 {
+        let shift = INDEX_BITS + pass * DIGIT_BITS;
+        let digit = |e: u64| ((e >> shift) & ((1 << DIGIT_BITS) - 1)) as usize;
+        let mut starts = vec![0usize; 1 << DIGIT_BITS];
+        for &e in events.iter() {
+            starts[digit(e)] += 1;
+        }
+        let mut sum = 0;
+        for start in &mut starts {
+            (*start, sum) = (sum, sum + *start);
+        }
+        for &e in events.iter() {
+            let d = digit(e);
+            sorted[starts[d]] = e;
+            starts[d] += 1;
+        }
+        std::mem::swap(events, &mut sorted);
+    }
+}
+
 /// Builds the tree over `prims` (ascending triangle indices, fewer than
 /// [`MAX_PRIMS`]) inside `bounds`, the union of their boxes. Returns the
 /// nodes and the primitive indices in depth-first order.
@@ -704,9 +734,8 @@ pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, V
         for (i, &p) in prims.iter().enumerate() {
             push_events(&mut events, &ctx.boxes[p as usize], axis, i as u32);
         }
-        if events.len() >= PARALLEL_AXIS_PRIMS {
-            use rayon::prelude::*;
-            events.par_sort_unstable();
+        if events.len() >= RADIX_SORT_EVENTS {
+            radix_sort_events(&mut events);
         } else {
             events.sort_unstable();
         }
@@ -723,6 +752,25 @@ pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, V
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn radix_sort_sorts_events_made_in_triangle_order() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        for len in [0, 1, 100, 5000, 70_000] {
+            let mut events = Vec::new();
+            for i in 0..len as u32 {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                // Few distinct positions (many equal ones), some negative, some flat boxes.
+                let lo = ((seed >> 33) % 64) as f32 - 20.0;
+                let hi = if seed % 5 == 0 { lo } else { lo + ((seed >> 20) % 9) as f32 * 0.25 };
+                push_events(&mut events, &Aabb::new(Vec3::splat(lo), Vec3::splat(hi)), 0, i);
+            }
+            let mut expected = events.clone();
+            expected.sort_unstable();
+            radix_sort_events(&mut events);
+            assert_eq!(events, expected, "{len} triangles");
+        }
+    }
 
     #[test]
     fn events_sort_like_positions_then_types() {
