@@ -128,15 +128,27 @@ impl Meter {
 struct Costs {
     traversal: f64,
     intersection: f64,
-    empty_bonus: f64,
+    /// `K_I · (1 − b)` without and with the empty bonus `b`.
+    weights: [f64; 2],
 }
 
 impl Costs {
+    fn new(config: &BuildConfig) -> Costs {
+        let intersection = config.intersection_cost as f64;
+        let weight = |bonus: f64| intersection * (1.0 - bonus);
+        Costs {
+            traversal: config.traversal_cost as f64,
+            intersection,
+            weights: [weight(0.0), weight(config.empty_bonus as f64)],
+        }
+    }
+
     /// `K_T + K_I · (1 − b) · (P_below · n_below + P_above · n_above)`, `b` the
-    /// empty bonus when one side holds no triangle.
+    /// empty bonus when one side holds no triangle. (Counts convert from i64,
+    /// one instruction; they are far below 2^53.)
     fn split(&self, p_below: f64, p_above: f64, n_below: usize, n_above: usize) -> f64 {
-        let bonus = if n_below == 0 || n_above == 0 { self.empty_bonus } else { 0.0 };
-        self.traversal + self.intersection * (1.0 - bonus) * (p_below * n_below as f64 + p_above * n_above as f64)
+        let weight = self.weights[(n_below == 0 || n_above == 0) as usize];
+        self.traversal + weight * (p_below * n_below as i64 as f64 + p_above * n_above as i64 as f64)
     }
 }
 
@@ -153,12 +165,7 @@ pub(super) struct Ctx<'a> {
 
 impl<'a> Ctx<'a> {
     pub(super) fn new(triangles: &'a [[Vec3; 3]], boxes: &'a [Aabb], config: &'a BuildConfig, max_depth: u32) -> Self {
-        let costs = Costs {
-            traversal: config.traversal_cost as f64,
-            intersection: config.intersection_cost as f64,
-            empty_bonus: config.empty_bonus as f64,
-        };
-        Ctx { triangles, boxes, config, costs, max_depth, meter: Meter::default() }
+        Ctx { triangles, boxes, config, costs: Costs::new(config), max_depth, meter: Meter::default() }
     }
 }
 
@@ -381,26 +388,46 @@ fn fresh_events(axis: usize, plan: &Plan, fresh: &mut [Vec<u64>; 2]) {
 /// Appends the events of one axis to both children's lists: the events of the
 /// triangles on one side, renumbered (the child numbering follows the
 /// parent's, so the lists stay sorted), with the straddlers' `fresh` events
-/// merged in on the way.
-fn split_axis(events: &[u64], plan: &Plan, fresh: &[Vec<u64>; 2], lists: &mut [Vec<u64>; 2]) {
-    let mut next = [0usize; 2];
+/// merged in on the way. `kept` counts the triangles wholly on each side.
+fn split_axis(events: &[u64], plan: &Plan, kept: [usize; 2], fresh: &[Vec<u64>; 2], lists: &mut [Vec<u64>; 2]) {
+    // Without branching on the side: each event is written to both lists,
+    // and only its side's cursor advances (the lists have a slot of slack).
+    let [below, above] = lists;
+    let (start_below, start_above) = (below.len(), above.len());
+    below.resize(start_below + 2 * kept[0] + fresh[0].len() + 1, 0);
+    above.resize(start_above + 2 * kept[1] + fresh[1].len() + 1, 0);
+    let (mut at_below, mut at_above) = (start_below, start_above);
+    let [fresh_below, fresh_above] = fresh;
+    let (mut next_below, mut next_above) = (0, 0);
+    // The next fresh event of each side, `u64::MAX` (above every event) when none is left.
+    let head = |list: &[u64], next: usize| list.get(next).copied().unwrap_or(u64::MAX);
+    let (mut head_below, mut head_above) = (head(fresh_below, 0), head(fresh_above, 0));
     for &e in events {
         let dest = plan.dest[event_index(e)];
-        let side = (dest >> 30) as u8;
-        if side == BOTH {
-            continue;
-        }
-        let c = (side >> 1) as usize;
         let renumbered = (e & !INDEX_MASK) | (dest as u64 & INDEX_MASK);
-        let (list, fresh, next) = (&mut lists[c], &fresh[c], &mut next[c]);
-        while *next < fresh.len() && fresh[*next] < renumbered {
-            list.push(fresh[*next]);
-            *next += 1;
+        // Fresh events below this one go out first, on both sides: every
+        // event still to come is above them.
+        while head_below < renumbered {
+            below[at_below] = head_below;
+            (at_below, next_below) = (at_below + 1, next_below + 1);
+            head_below = head(fresh_below, next_below);
         }
-        list.push(renumbered);
+        while head_above < renumbered {
+            above[at_above] = head_above;
+            (at_above, next_above) = (at_above + 1, next_above + 1);
+            head_above = head(fresh_above, next_above);
+        }
+        below[at_below] = renumbered;
+        above[at_above] = renumbered;
+        let side = (dest >> 30) as u8;
+        at_below += (side == BELOW) as usize;
+        at_above += (side == ABOVE) as usize;
     }
-    for ((list, fresh), next) in lists.iter_mut().zip(fresh).zip(next) {
-        list.extend_from_slice(&fresh[next..]);
+    for (list, at, rest) in
+        [(below, at_below, &fresh_below[next_below..]), (above, at_above, &fresh_above[next_above..])]
+    {
+        list.truncate(at);
+        list.extend_from_slice(rest);
     }
 }
 
@@ -515,8 +542,8 @@ fn split_node(ctx: &Ctx, node: NodeData, voxel: &Aabb, s: &Split, scratch: &mut 
         let [x, y, z] = per_axis(true, |axis| {
             let mut fresh = Default::default();
             fresh_events(axis, &plan, &mut fresh);
-            let mut lists = [0, 1].map(|c| Vec::with_capacity(2 * kept[c] + fresh[c].len()));
-            split_axis(node.axis(axis), &plan, &fresh, &mut lists);
+            let mut lists = [0, 1].map(|c| Vec::with_capacity(2 * kept[c] + fresh[c].len() + 1));
+            split_axis(node.axis(axis), &plan, kept, &fresh, &mut lists);
             lists
         });
         drop(node);
@@ -529,10 +556,11 @@ fn split_node(ctx: &Ctx, node: NodeData, voxel: &Aabb, s: &Split, scratch: &mut 
     for (axis, fresh) in fresh.iter_mut().enumerate() {
         fresh_events(axis, &plan, fresh);
     }
-    let mut lists = [0, 1].map(|c| Vec::with_capacity(6 * kept[c] + fresh.iter().map(|f| f[c].len()).sum::<usize>()));
+    let mut lists =
+        [0, 1].map(|c| Vec::with_capacity(6 * kept[c] + fresh.iter().map(|f| f[c].len()).sum::<usize>() + 1));
     let mut ends = [[0; 3]; 2];
     for axis in 0..3 {
-        split_axis(node.axis(axis), &plan, &fresh[axis], &mut lists);
+        split_axis(node.axis(axis), &plan, kept, &fresh[axis], &mut lists);
         for c in 0..2 {
             ends[c][axis] = lists[c].len();
         }
@@ -665,6 +693,36 @@ fn flatten(part: Part, nodes: &mut Vec<KdNode>, prims: &mut Vec<u32>) {
     }
 }
 
+/// Event lists at least this long are radix-sorted.
+const RADIX_SORT_EVENTS: usize = 4096;
+
+/// Sorts events made in triangle order. A stable radix sort (least
+/// significant digit first, three passes of 12 bits) on the position and type
+/// only: events of equal position and type stay in triangle order, so the
+/// result is the one of sorting the whole u64s.
+fn radix_sort_events(events: &mut Vec<u64>) {
+    const DIGIT_BITS: u32 = 12;
+    let mut sorted = vec![0u64; events.len()];
+    for pass in 0..3 {
+        let shift = INDEX_BITS + pass * DIGIT_BITS;
+        let digit = |e: u64| ((e >> shift) & ((1 << DIGIT_BITS) - 1)) as usize;
+        let mut starts = vec![0usize; 1 << DIGIT_BITS];
+        for &e in events.iter() {
+            starts[digit(e)] += 1;
+        }
+        let mut sum = 0;
+        for start in &mut starts {
+            (*start, sum) = (sum, sum + *start);
+        }
+        for &e in events.iter() {
+            let d = digit(e);
+            sorted[starts[d]] = e;
+            starts[d] += 1;
+        }
+        std::mem::swap(events, &mut sorted);
+    }
+}
+
 /// Builds the tree over `prims` (ascending triangle indices, fewer than
 /// [`MAX_PRIMS`]) inside `bounds`, the union of their boxes. Returns the
 /// nodes and the primitive indices in depth-first order.
@@ -676,9 +734,8 @@ pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, V
         for (i, &p) in prims.iter().enumerate() {
             push_events(&mut events, &ctx.boxes[p as usize], axis, i as u32);
         }
-        if events.len() >= PARALLEL_AXIS_PRIMS {
-            use rayon::prelude::*;
-            events.par_sort_unstable();
+        if events.len() >= RADIX_SORT_EVENTS {
+            radix_sort_events(&mut events);
         } else {
             events.sort_unstable();
         }
@@ -695,6 +752,25 @@ pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, V
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn radix_sort_sorts_events_made_in_triangle_order() {
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        for len in [0, 1, 100, 5000, 70_000] {
+            let mut events = Vec::new();
+            for i in 0..len as u32 {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                // Few distinct positions (many equal ones), some negative, some flat boxes.
+                let lo = ((seed >> 33) % 64) as f32 - 20.0;
+                let hi = if seed % 5 == 0 { lo } else { lo + ((seed >> 20) % 9) as f32 * 0.25 };
+                push_events(&mut events, &Aabb::new(Vec3::splat(lo), Vec3::splat(hi)), 0, i);
+            }
+            let mut expected = events.clone();
+            expected.sort_unstable();
+            radix_sort_events(&mut events);
+            assert_eq!(events, expected, "{len} triangles");
+        }
+    }
 
     #[test]
     fn events_sort_like_positions_then_types() {
