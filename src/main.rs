@@ -9,7 +9,7 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use kdtrace::gpu::{list_devices, ContextOptions, GpuContext};
-use kdtrace::kdtree::traverse::{Counters, Traversal, Variant};
+use kdtrace::kdtree::traverse::{Counters, Traversal};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::{PointLight, Primary, RenderPlan, RenderSettings};
 use kdtrace::scene::{Camera, Scene};
@@ -210,32 +210,62 @@ struct SubgroupsArgs {
 
 #[derive(clap::Args)]
 struct BenchArgs {
-    /// OBJ scene file.
-    scene: PathBuf,
+    /// OBJ scene files.
+    #[arg(required = true)]
+    scenes: Vec<PathBuf>,
     /// Camera rays: image width and height.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 256)]
     width: u32,
-    #[arg(long, default_value_t = 384)]
+    #[arg(long, default_value_t = 192)]
     height: u32,
     /// Random rays (uniform origins in the box, uniform directions).
-    #[arg(long, default_value_t = 200_000)]
+    #[arg(long, default_value_t = 50_000)]
     random: usize,
-    /// Timed repetitions per traversal (after one warm-up); the median is reported.
+    /// Timed repetitions per cell (after one warm-up); median, min and max are reported.
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Rays per batch checked against the float64 brute force.
-    #[arg(long, default_value_t = 1000)]
+    /// Rays per cell judged against the exact reference (evenly spaced).
+    #[arg(long, default_value_t = 500)]
     reference_sample: usize,
-    /// Comma-separated traversals, `name`, `name:stack-size`, either with `/plain` for the
-    /// robustness measures off (default: all, short stacks of 1, 2, 3 and 8).
+    /// GPU traversals: `all` or `name[:stack-size][/plain]`, comma-separated. Without
+    /// `:stack-size` the short stacks run every --stack-sizes; without `/plain`
+    /// every --robust level; packet variants every --packet-widths.
+    #[arg(long, default_value = "all")]
+    traversals: String,
+    #[arg(long, default_value = "1,3,8")]
+    stack_sizes: String,
+    #[arg(long, default_value = "1")]
+    packet_widths: String,
+    /// Robustness levels: on, off or on,off.
+    #[arg(long, default_value = "on,off")]
+    robust: String,
+    /// Builder settings: default, pbrt-v3, wald-havran.
+    #[arg(long, default_value = "default,pbrt-v3,wald-havran")]
+    builders: String,
+    /// Ray kinds: camera, shadow, reflection, diffuse, random.
+    #[arg(long, default_value = "camera,shadow,reflection,diffuse,random")]
+    kinds: String,
+    /// CPU-twin traversals (rayon over rays), same syntax as --traversals; `none` for none.
+    #[arg(long, default_value = "stack")]
+    cpu: String,
+    /// Leave Embree out (it runs by default when built with --features embree).
     #[arg(long)]
-    traversals: Option<String>,
-    /// Lanes per packet for every traversal (1 = single rays).
-    #[arg(long, default_value_t = 1)]
-    packet_width: u32,
+    no_embree: bool,
+    /// Leave the Vulkan device out (CPU peers only).
+    #[arg(long)]
+    no_gpu: bool,
     /// Require this subgroup size.
     #[arg(long)]
     subgroup_size: Option<u32>,
+    /// Seed of the random and diffuse rays.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// CSV output (one row per cell).
+    #[arg(long, default_value = "bench.csv")]
+    csv: PathBuf,
+    /// Folder for the PNG charts (bench-time-error.png, bench-rays-per-second.png, bench-nodes.png).
+    #[arg(long, default_value = ".")]
+    plots: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -672,80 +702,115 @@ fn write_counters_csv(path: &Path, counters: &[Counters]) -> Result<()> {
     Ok(())
 }
 
+/// The first number of /proc/loadavg's three, as text (or why not).
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unavailable".into())
+}
+
+/// Today's date (UTC) as YYYY-MM-DD, from the system clock (Hinnant's civil-from-days).
+fn today() -> String {
+    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let z = (secs / 86_400) as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}-{month:02}-{day:02}")
+}
+
 fn bench(args: BenchArgs) -> Result<()> {
-    let traversals: Vec<Traversal> = match &args.traversals {
-        Some(list) => list
-            .split(',')
-            .map(|item| {
-                // `name[:stack-size][/plain]`
-                let (item_name, plain) = match item.trim().strip_suffix("/plain") {
-                    Some(rest) => (rest, true),
-                    None => (item.trim(), false),
-                };
-                let (name, size) = match item_name.split_once(':') {
-                    Some((n, s)) => (n, s.parse::<u32>().with_context(|| format!("stack size in '{item}'"))?),
-                    None => (item_name, 3),
-                };
-                let t = Traversal {
-                    stack_size: size,
-                    packet_width: args.packet_width,
-                    subgroup_size: args.subgroup_size,
-                    robust: !plain,
-                    ..Traversal::closest(name.parse()?)
-                };
-                t.validate()?;
-                Ok(t)
-            })
-            .collect::<Result<_>>()?,
-        None => {
-            let mut all = vec![];
-            for v in Variant::ALL {
-                if v.uses_short_stack() {
-                    all.extend([1, 2, 3, 8].map(|n| Traversal { stack_size: n, ..Traversal::closest(v) }));
-                } else {
-                    all.push(Traversal::closest(v));
-                }
-            }
-            for t in &mut all {
-                t.packet_width = args.packet_width;
-                t.subgroup_size = args.subgroup_size;
-            }
-            all
-        }
-    };
-    let (scene, tree) = load_and_build(&args.scene)?;
-    let ctx = context()?;
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
-    let camera = default_camera(&args.scene, &scene)?;
-    let batches = [
-        ("camera", kdtrace::render::camera_rays(&camera, args.width, args.height)),
-        ("random", kdtrace::raygen::random_rays(&scene.bounds, args.random, 1)),
-    ];
-    println!(
-        "# kdtrace bench {} — {} triangles, {} nodes, on {}",
-        args.scene.display(),
-        scene.triangles.len(),
-        tree.nodes.len(),
-        ctx.info
-    );
-    for (kind, rays) in &batches {
-        if rays.is_empty() {
-            continue;
-        }
-        let bar = spinner(format!("{kind} rays"));
-        let rows = kdtrace::bench::compare_traversals(
-            &mut tracer,
-            &scene,
-            rays,
-            &traversals,
-            args.repeat,
-            args.reference_sample,
-            |what| bar.set_message(format!("{kind} rays: {what}")),
-        )?;
-        bar.finish_and_clear();
-        println!("\n## {} {kind} rays (GPU timestamps, median of {})\n", rays.len(), args.repeat.max(1));
-        print!("{}", kdtrace::bench::markdown_table(&rows));
+    use kdtrace::bench::matrix::{expand_traversals, parse_list};
+    use kdtrace::bench::{report, MatrixOptions, RayKind};
+    if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
+        bail!("--width and --height must be in 1..=16384");
     }
+    if args.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let robust: Vec<bool> = args
+        .robust
+        .split(',')
+        .map(|s| match s.trim() {
+            "on" => Ok(true),
+            "off" => Ok(false),
+            other => bail!("--robust: '{other}' is neither on nor off"),
+        })
+        .collect::<Result<_>>()?;
+    let stack_sizes: Vec<u32> = parse_list("--stack-sizes", &args.stack_sizes)?;
+    let widths: Vec<u32> = parse_list("--packet-widths", &args.packet_widths)?;
+    let traversals = expand_traversals(&args.traversals, &stack_sizes, &widths, &robust, args.subgroup_size)?;
+    let cpu_traversals = match args.cpu.as_str() {
+        "none" => Vec::new(),
+        list => expand_traversals(list, &stack_sizes, &[1], &robust, None)?,
+    };
+    let options = MatrixOptions {
+        width: args.width,
+        height: args.height,
+        random: args.random,
+        repeat: args.repeat,
+        reference_sample: args.reference_sample,
+        traversals: if args.no_gpu { Vec::new() } else { traversals },
+        cpu_traversals,
+        builders: args.builders.split(',').map(|s| s.trim().to_string()).collect(),
+        kinds: args.kinds.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<Vec<RayKind>>>()?,
+        embree: cfg!(feature = "embree") && !args.no_embree,
+        seed: args.seed,
+    };
+    for b in &options.builders {
+        kdtrace::bench::matrix::builder_config(b)?;
+    }
+    let ctx = if args.no_gpu { None } else { Some(context()?) };
+    let device = ctx.as_ref().map_or("no Vulkan device (--no-gpu)".to_string(), |c| c.info.to_string());
+    let load_before = load_average();
+    let mut cells = Vec::new();
+    for path in &args.scenes {
+        let bar = spinner(format!("loading {}", path.display()));
+        let scene = Scene::load(path)?;
+        let camera = default_camera(path, &scene)?;
+        let name = path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        let found = kdtrace::bench::run_scene(ctx.as_ref(), &name, &scene, &camera, &options, |what| {
+            bar.set_message(format!("{name}: {what}"))
+        })?;
+        bar.finish_and_clear();
+        cells.extend(found);
+    }
+    if let Some(ctx) = &ctx {
+        ctx.check_validation()?;
+    }
+    let command: Vec<String> = std::env::args().collect();
+    println!("# kdtrace bench, {}\n", today());
+    println!("- device: {device}");
+    println!(
+        "- CPU peers: {} rayon threads on {} cores; Embree {}",
+        rayon::current_num_threads(),
+        std::thread::available_parallelism().map_or(0, |n| n.get()),
+        if options.embree { "3 (libembree3)" } else { "not built (--features embree)" }
+    );
+    println!("- load average (/proc/loadavg, 1/5/15 min): {load_before} before, {} after", load_average());
+    println!("- command: `{}`", command.join(" "));
+    println!(
+        "- times: build = kd-tree build (or Embree commit); upload = scene to the device; pipeline = \
+         `prepare` (compile on first use, ~0 when cached); trace = GPU timestamps around the \
+         dispatches (CPU: wall clock), median of {} after a warm-up (min–max); call = the whole \
+         `trace` call with ray upload, submission and readback\n",
+        args.repeat
+    );
+    println!("## Summary\n\n{}", report::summary_table(&cells));
+    println!("## Every cell\n\n{}", report::markdown_table(&cells));
+    report::write_csv(&args.csv, &cells)?;
+    let title = format!("kdtrace bench on {}", ctx.as_ref().map_or("CPU only".into(), |c| c.info.name.clone()));
+    let plots = kdtrace::bench::plot::write_plots(&args.plots, &cells, &title)?;
+    eprintln!(
+        "wrote {} and {}",
+        args.csv.display(),
+        plots.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+    );
     Ok(())
 }
 

@@ -1,4 +1,5 @@
-//! The `kdtrace` binary end to end: render, rays, trace, stats and bad input.
+//! The `kdtrace` binary end to end: render, rays, trace, stats and bad input
+//! (`bench` is in tests/bench.rs).
 
 mod common;
 
@@ -187,39 +188,6 @@ fn counters_csv_heatmap_and_any_hit() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("heatmap of nodes"), "{}", stderr(&o));
     assert_eq!(image::open(&png).unwrap().to_rgb8().dimensions(), (80, 60));
-}
-
-#[test]
-fn bench_prints_a_table_for_every_requested_traversal() {
-    let scene = scene_path("cornell_box.obj");
-    let o = kdtrace(&[
-        "bench",
-        scene.to_str().unwrap(),
-        "--width",
-        "32",
-        "--height",
-        "24",
-        "--random",
-        "500",
-        "--repeat",
-        "1",
-        "--reference-sample",
-        "100",
-        "--traversals",
-        "stack,short-stack:3,ropes",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let out = String::from_utf8_lossy(&o.stdout);
-    for needle in ["| stack |", "| short-stack(3) |", "| ropes |", "768 camera rays", "500 random rays"] {
-        assert!(out.contains(needle), "missing {needle:?} in\n{out}");
-    }
-    // Every row agrees with the stack and with the float64 reference.
-    for line in out.lines().filter(|l| l.starts_with("| stack") || l.starts_with("| short") || l.starts_with("| ropes"))
-    {
-        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
-        assert_eq!(cells[10], "0", "hits differ from stack: {line}");
-        assert!(cells[11].starts_with("0/"), "float64 errors: {line}");
-    }
 }
 
 #[test]

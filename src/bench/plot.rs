@@ -1,0 +1,227 @@
+//! The matrix's PNG charts (plotters, bitmap backend): time against error with
+//! the Pareto front, rays/s per setting and node visits per setting, one panel
+//! per scene; every point is labelled with its settings.
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::ranged1d::SegmentValue;
+use plotters::prelude::*;
+
+use crate::bench::matrix::{Backend, Cell};
+use crate::bench::rays::RayKind;
+use crate::error::{Error, Result};
+
+/// Debian's DejaVu Sans (package fonts-dejavu-core, installed by tools/setup).
+const FONT_PATHS: [&str; 2] =
+    ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
+
+fn register_font() -> Result<()> {
+    let font = FONT_PATHS.iter().find_map(|p| std::fs::read(p).ok()).ok_or_else(|| {
+        Error::InvalidInput(format!("no font for the charts: install fonts-dejavu-core ({})", FONT_PATHS[0]))
+    })?;
+    let font: &'static [u8] = Box::leak(font.into_boxed_slice());
+    plotters::style::register_font("sans-serif", FontStyle::Normal, font)
+        .map_err(|_| Error::InvalidInput("the chart font could not be loaded".into()))
+}
+
+/// The scenes in the order they first appear.
+fn scenes(cells: &[Cell]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for c in cells {
+        if !out.contains(&c.scene) {
+            out.push(c.scene.clone());
+        }
+    }
+    out
+}
+
+/// The settings labels of a scene's cells, in first-appearance order.
+fn labels(cells: &[&Cell]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for c in cells {
+        let l = c.label();
+        if !out.contains(&l) {
+            out.push(l);
+        }
+    }
+    out
+}
+
+fn backend_color(b: Backend) -> RGBColor {
+    match b {
+        Backend::Gpu => RGBColor(31, 119, 180),
+        Backend::Cpu => RGBColor(44, 160, 44),
+        Backend::Embree => RGBColor(214, 39, 40),
+    }
+}
+
+fn kind_color(k: RayKind) -> RGBAColor {
+    Palette99::pick(RayKind::ALL.iter().position(|&x| x == k).unwrap_or(0)).to_rgba()
+}
+
+type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
+
+fn wrap(path: &Path, r: DrawResult) -> Result<()> {
+    r.map_err(|e| Error::InvalidInput(format!("{}: drawing the chart failed: {e}", path.display())))
+}
+
+/// One point per setting: nanoseconds per ray (trace time summed over the ray
+/// kinds ÷ their rays) against the disagreement with the exact reference (%,
+/// over all kinds' samples); the Pareto front (no other point both faster and
+/// more accurate) joined by a line.
+pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
+    let scenes = scenes(cells);
+    let draw = || -> DrawResult {
+        let root = BitMapBackend::new(path, (1400, 700 * scenes.len().max(1) as u32 + 40)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (header, body) = root.split_vertically(40);
+        header.titled(title, ("sans-serif", 20))?;
+        for (area, scene) in body.split_evenly((scenes.len().max(1), 1)).iter().zip(&scenes) {
+            let group: Vec<&Cell> = cells.iter().filter(|c| &c.scene == scene).collect();
+            let points: Vec<(String, Backend, f64, f64)> = labels(&group)
+                .into_iter()
+                .map(|label| {
+                    let mine: Vec<&&Cell> = group.iter().filter(|c| c.label() == label).collect();
+                    let seconds: f64 = mine.iter().map(|c| c.trace_seconds[0]).sum();
+                    let rays: usize = mine.iter().map(|c| c.rays).sum();
+                    let sample: usize = mine.iter().map(|c| c.tally.rays).sum();
+                    let wrong: usize = mine.iter().map(|c| c.disagreeing()).sum();
+                    let error = 100.0 * wrong as f64 / sample.max(1) as f64;
+                    (label, mine[0].backend, 1e9 * seconds / rays.max(1) as f64, error)
+                })
+                .collect();
+            let x_max = points.iter().map(|p| p.2).fold(0.0, f64::max).max(1e-3) * 1.5;
+            let x_min = points.iter().map(|p| p.2).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / 1.5;
+            let y_max = points.iter().map(|p| p.3).fold(0.0, f64::max).max(0.1) * 1.15;
+            let mut chart = ChartBuilder::on(area)
+                .caption(format!("{scene}: time vs error (all ray kinds)"), ("sans-serif", 16))
+                .margin(15)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)?;
+            chart
+                .configure_mesh()
+                .x_desc("trace ns per ray (median, log scale)")
+                .y_desc("rays disagreeing with the exact reference, %")
+                .draw()?;
+            // The Pareto front: sorted by time, each point more accurate than all faster ones.
+            let mut sorted = points.clone();
+            sorted.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)));
+            let mut front = Vec::new();
+            let mut best = f64::INFINITY;
+            for p in &sorted {
+                if p.3 < best {
+                    best = p.3;
+                    front.push((p.2, p.3));
+                }
+            }
+            chart
+                .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
+                .label("Pareto front")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(1)));
+            for backend in [Backend::Gpu, Backend::Cpu, Backend::Embree] {
+                let color = backend_color(backend);
+                let mine: Vec<&(String, Backend, f64, f64)> = points.iter().filter(|p| p.1 == backend).collect();
+                if mine.is_empty() {
+                    continue;
+                }
+                chart
+                    .draw_series(mine.iter().map(|p| Circle::new((p.2, p.3), 4, color.filled())))?
+                    .label(backend.name())
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 4, color.filled()));
+                // Labels staggered over five lines so that equal errors stay readable.
+                chart.draw_series(mine.iter().enumerate().map(|(i, p)| {
+                    let font = ("sans-serif", 10).into_font().color(&color);
+                    EmptyElement::at((p.2, p.3)) + Text::new(p.0.clone(), (4, -8 - 11 * (i as i32 % 5)), font)
+                }))?;
+            }
+            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        }
+        root.present()?;
+        Ok(())
+    };
+    wrap(path, draw())
+}
+
+/// A dot chart per scene: one row per setting, one dot per ray kind at `value(cell)`.
+fn dot_chart(
+    path: &Path,
+    cells: &[Cell],
+    title: &str,
+    x_desc: &str,
+    value: impl Fn(&Cell) -> Option<f64>,
+) -> Result<()> {
+    let scenes = scenes(cells);
+    let panels: Vec<(String, Vec<&Cell>, Vec<String>)> = scenes
+        .iter()
+        .map(|s| {
+            let group: Vec<&Cell> = cells.iter().filter(|c| &c.scene == s && value(c).is_some()).collect();
+            let rows = labels(&group);
+            (s.clone(), group, rows)
+        })
+        .collect();
+    let heights: Vec<u32> = panels.iter().map(|p| 18 * p.2.len().max(1) as u32 + 90).collect();
+    let draw = || -> DrawResult {
+        let total: u32 = heights.iter().sum::<u32>() + 40;
+        let root = BitMapBackend::new(path, (1200, total)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (header, mut body) = root.split_vertically(40);
+        header.titled(title, ("sans-serif", 20))?;
+        for ((scene, group, rows), h) in panels.iter().zip(&heights) {
+            let (area, rest) = body.split_vertically(*h);
+            body = rest;
+            let x_max = group.iter().filter_map(|c| value(c)).fold(0.0, f64::max).max(1e-3) * 1.1;
+            let n = rows.len().max(1) as u32;
+            let mut chart = ChartBuilder::on(&area)
+                .caption(scene, ("sans-serif", 16))
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(330)
+                .build_cartesian_2d(0.0..x_max, (0u32..n).into_segmented())?;
+            let rows_for_labels = rows.clone();
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_labels(n as usize)
+                .y_label_formatter(&move |v| match v {
+                    SegmentValue::CenterOf(i) => rows_for_labels.get(*i as usize).cloned().unwrap_or_default(),
+                    _ => String::new(),
+                })
+                .draw()?;
+            for kind in RayKind::ALL {
+                let color = kind_color(kind);
+                let dots: Vec<(f64, u32)> = group
+                    .iter()
+                    .filter(|c| c.kind == kind)
+                    .filter_map(|c| Some((value(c)?, rows.iter().position(|r| *r == c.label())? as u32)))
+                    .collect();
+                if dots.is_empty() {
+                    continue;
+                }
+                chart
+                    .draw_series(
+                        dots.iter().map(|&(x, i)| Circle::new((x, SegmentValue::CenterOf(i)), 4, color.filled())),
+                    )?
+                    .label(kind.name())
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 4, color.filled()));
+            }
+            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        }
+        root.present()?;
+        Ok(())
+    };
+    wrap(path, draw())
+}
+
+/// The three charts in `dir`, named `bench-time-error.png`, `bench-rays-per-second.png`
+/// and `bench-nodes.png`; returns their paths.
+pub fn write_plots(dir: &Path, cells: &[Cell], title: &str) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.into(), source })?;
+    register_font()?;
+    let paths: Vec<PathBuf> =
+        ["bench-time-error.png", "bench-rays-per-second.png", "bench-nodes.png"].iter().map(|n| dir.join(n)).collect();
+    time_vs_error(&paths[0], cells, title)?;
+    dot_chart(&paths[1], cells, title, "M rays/s (median)", |c| Some(c.rays_per_second() / 1e6))?;
+    dot_chart(&paths[2], cells, title, "nodes visited per ray", |c| c.counters.map(|[n, _, _]| n))?;
+    Ok(paths)
+}
