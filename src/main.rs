@@ -266,6 +266,33 @@ struct BenchArgs {
     /// Folder for the PNG charts (bench-time-error.png, bench-rays-per-second.png, bench-nodes.png).
     #[arg(long, default_value = ".")]
     plots: PathBuf,
+    /// Also render images and compare them with a converged reference: each cell's
+    /// render time with its RMSE and SSIM (images CSV and bench-images-time-error.png).
+    #[arg(long)]
+    images: bool,
+    /// Image size for --images, WxH.
+    #[arg(long, default_value = "128x96")]
+    image_size: String,
+    /// Samples per pixel of the image cells.
+    #[arg(long, default_value = "1,4,16,64")]
+    image_spp: String,
+    /// Diffuse bounces of the image cells.
+    #[arg(long, default_value = "0,1,3")]
+    image_bounces: String,
+    /// First hits of the image cells: trace, raster or trace,raster.
+    #[arg(long, default_value = "trace,raster")]
+    image_primary: String,
+    /// GPU traversals of the image cells (same syntax as --traversals, no `all`).
+    #[arg(long, default_value = "stack")]
+    image_traversals: String,
+    /// Samples per pixel and bounces of the reference image.
+    #[arg(long, default_value_t = 1024)]
+    reference_spp: u32,
+    #[arg(long, default_value_t = 3)]
+    reference_bounces: u32,
+    /// CSV of the image cells.
+    #[arg(long, default_value = "bench-images.csv")]
+    images_csv: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -555,7 +582,7 @@ fn compare_renders(
     let ms = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{:.1}", s * 1e3));
     eprintln!(
         "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>8}",
-        "variant", "setup ms", "trace ms", "shade ms", "raster ms", "wall ms", "rays", "RMSE"
+        "variant", "setup ms", "loop ms", "trace ms", "shade ms", "raster ms", "rays", "RMSE"
     );
     for (name, variant) in &variants {
         // A fresh tracer, so that the variant compiles its own pipelines.
@@ -566,18 +593,22 @@ fn compare_renders(
             out.pixels.iter().zip(&first.pixels).map(|(a, b)| f64::from((*a - *b).length_squared()) / 3.0).sum::<f64>();
         let rmse = (sq / out.pixels.len() as f64).sqrt() / mean.max(f64::MIN_POSITIVE);
         eprintln!(
-            "{:<18} {:>9.1} {:>9} {:>9} {:>9} {:>9.1} {:>11} {:>7.2}%",
+            "{:<18} {:>9.1} {:>9.1} {:>9} {:>9} {:>9} {:>11} {:>7.2}%",
             name,
             s.setup_seconds * 1e3,
+            s.render_seconds * 1e3,
             ms(s.trace_seconds),
             ms(s.shade_seconds),
             ms(s.raster_seconds),
-            (s.setup_seconds + s.render_seconds) * 1e3,
             s.rays(),
             rmse * 100.0
         );
     }
-    eprintln!("(RMSE: of each variant's image against the first variant's, relative to its mean; the first variant ran twice)");
+    eprintln!(
+        "(setup: pipelines and uploads; loop: the sample loop's wall time; trace/shade/raster: GPU \
+         timestamps, '-' where the device gave none; RMSE: each image against the first one, relative \
+         to its mean; the first variant ran twice)"
+    );
     Ok(())
 }
 
@@ -783,6 +814,11 @@ fn bench(args: BenchArgs) -> Result<()> {
     if let Some(ctx) = &ctx {
         ctx.check_validation()?;
     }
+    let image_cells = match (args.images, &ctx) {
+        (false, _) => Vec::new(),
+        (true, None) => bail!("--images renders on the Vulkan device: drop --no-gpu"),
+        (true, Some(ctx)) => bench_images(&args, ctx, &stack_sizes, &widths, &robust)?,
+    };
     let command: Vec<String> = std::env::args().collect();
     println!("# kdtrace bench, {}\n", today());
     println!("- device: {device}");
@@ -805,13 +841,78 @@ fn bench(args: BenchArgs) -> Result<()> {
     println!("## Every cell\n\n{}", report::markdown_table(&cells));
     report::write_csv(&args.csv, &cells)?;
     let title = format!("kdtrace bench on {}", ctx.as_ref().map_or("CPU only".into(), |c| c.info.name.clone()));
-    let plots = kdtrace::bench::plot::write_plots(&args.plots, &cells, &title)?;
+    let mut plots = kdtrace::bench::plot::write_plots(&args.plots, &cells, &title)?;
+    if args.images {
+        use kdtrace::bench::images;
+        println!(
+            "## Rendered images\n\nAgainst a reference of {} spp and {} bounces per scene (scenes without \
+             emitters get the shadow rays' point light); wall = the render call after a one-sample warm-up.\n\n{}",
+            args.reference_spp,
+            args.reference_bounces,
+            images::images_table(&image_cells)
+        );
+        images::write_images_csv(&args.images_csv, &image_cells)?;
+        let png = args.plots.join("bench-images-time-error.png");
+        images::plot_images(&png, &image_cells, &format!("{title}: rendered images"))?;
+        plots.push(args.images_csv.clone());
+        plots.push(png);
+    }
     eprintln!(
         "wrote {} and {}",
         args.csv.display(),
         plots.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
     );
     Ok(())
+}
+
+/// `bench --images`: the image cells of every scene.
+fn bench_images(
+    args: &BenchArgs,
+    ctx: &std::sync::Arc<GpuContext>,
+    stack_sizes: &[u32],
+    widths: &[u32],
+    robust: &[bool],
+) -> Result<Vec<kdtrace::bench::images::ImageCell>> {
+    use kdtrace::bench::matrix::{expand_traversals, parse_list};
+    let (w, h) = args
+        .image_size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| (1..=4096).contains(&w) && (1..=4096).contains(&h))
+        .with_context(|| format!("--image-size '{}': expected WxH, each in 1..=4096", args.image_size))?;
+    let primaries = args
+        .image_primary
+        .split(',')
+        .map(|p| match p.trim() {
+            "trace" => Ok(Primary::Trace),
+            "raster" => Ok(Primary::Raster),
+            other => bail!("--image-primary: unknown '{other}' (trace, raster)"),
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let options = kdtrace::bench::images::ImageOptions {
+        width: w,
+        height: h,
+        spp: parse_list("--image-spp", &args.image_spp)?,
+        bounces: parse_list("--image-bounces", &args.image_bounces)?,
+        primaries,
+        traversals: expand_traversals(&args.image_traversals, stack_sizes, widths, robust, args.subgroup_size)?,
+        reference_spp: args.reference_spp,
+        reference_bounces: args.reference_bounces,
+    };
+    let mut cells = Vec::new();
+    for path in &args.scenes {
+        let (scene, tree) = load_and_build(path)?;
+        let camera = default_camera(path, &scene)?;
+        let name = path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        let mut tracer = Tracer::new(ctx, &tree, &scene.triangles)?;
+        let bar = spinner(format!("{name}: images"));
+        let (found, _) = kdtrace::bench::images::run_images(&mut tracer, &name, &scene, &camera, &options, |m| {
+            bar.set_message(m.to_string())
+        })?;
+        bar.finish_and_clear();
+        cells.extend(found);
+    }
+    Ok(cells)
 }
 
 fn subgroups(args: SubgroupsArgs) -> Result<()> {

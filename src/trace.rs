@@ -707,6 +707,9 @@ impl Tracer {
             if let (Some(ts), Some(total)) = (&timestamps, result.gpu_seconds.as_mut()) {
                 *total += ts.seconds_between(0, 1)?;
             }
+            if ctx.timestamps_unreliable() {
+                result.gpu_seconds = None;
+            }
             let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * HIT_BYTES as usize)?);
             if let Some(first) = hits.iter().position(|h| h.prim_id == PRIM_INCOMPLETE) {
                 let count = hits.iter().filter(|h| h.prim_id == PRIM_INCOMPLETE).count();

@@ -5,9 +5,11 @@
 //! Embree 3 — every cell timed after a warm-up and judged against the exact
 //! reference on a sample of its rays, so each speed comes with its error.
 //! Outputs: a Markdown table, CSV and PNG charts ([`report`], [`plot`]).
+//! With `--images`, rendered images against a converged reference ([`images`]).
 
 #[cfg(feature = "embree")]
 pub mod embree;
+pub mod images;
 pub mod matrix;
 pub mod plot;
 pub mod rays;

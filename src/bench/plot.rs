@@ -15,6 +15,12 @@ use crate::error::{Error, Result};
 const FONT_PATHS: [&str; 2] =
     ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
 
+/// Registers the charts' font once per process.
+pub fn ensure_font() -> Result<()> {
+    static DONE: std::sync::OnceLock<std::result::Result<(), String>> = std::sync::OnceLock::new();
+    DONE.get_or_init(|| register_font().map_err(|e| e.to_string())).clone().map_err(Error::InvalidInput)
+}
+
 fn register_font() -> Result<()> {
     let font = FONT_PATHS.iter().find_map(|p| std::fs::read(p).ok()).ok_or_else(|| {
         Error::InvalidInput(format!("no font for the charts: install fonts-dejavu-core ({})", FONT_PATHS[0]))
@@ -217,7 +223,7 @@ fn dot_chart(
 /// and `bench-nodes.png`; returns their paths.
 pub fn write_plots(dir: &Path, cells: &[Cell], title: &str) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.into(), source })?;
-    register_font()?;
+    ensure_font()?;
     let paths: Vec<PathBuf> =
         ["bench-time-error.png", "bench-rays-per-second.png", "bench-nodes.png"].iter().map(|n| dir.join(n)).collect();
     time_vs_error(&paths[0], cells, title)?;

@@ -195,6 +195,8 @@ pub struct GpuContext {
     queue_lock: Arc<Mutex<()>>,
     command_pool: Mutex<vk::CommandPool>,
     debug: Option<Debug>,
+    /// A draw was recorded on this context (see [`GpuContext::timestamps_unreliable`]).
+    drew: std::sync::atomic::AtomicBool,
 }
 
 unsafe extern "system" fn debug_callback(
@@ -390,6 +392,7 @@ impl GpuContext {
             queue_lock: Arc::default(),
             command_pool: Mutex::new(pool),
             debug,
+            drew: Default::default(),
         })
     }
 
@@ -489,7 +492,20 @@ impl GpuContext {
             queue_lock: queue_lock.unwrap_or_default(),
             command_pool: Mutex::new(pool),
             debug: None,
+            drew: Default::default(),
         }))
+    }
+
+    /// True when GPU timestamps of this context cannot be trusted: on lavapipe
+    /// (Mesa 22.3), once a draw has run, later timestamps no longer advance with
+    /// the work. Timing code reports no GPU time then.
+    pub fn timestamps_unreliable(&self) -> bool {
+        self.drew.load(std::sync::atomic::Ordering::Relaxed) && self.info.name.contains("llvmpipe")
+    }
+
+    /// Notes that a draw was recorded (see [`GpuContext::timestamps_unreliable`]).
+    pub(crate) fn note_draw(&self) {
+        self.drew.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// True when the instance, device and allocator belong to an engine

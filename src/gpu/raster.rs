@@ -366,6 +366,7 @@ impl Rasterizer {
     /// [`Rasterizer::visibility_bytes`] with `TRANSFER_DST` usage; both and this
     /// rasterizer must live until `cmd` completes.
     pub unsafe fn record(&self, cmd: vk::CommandBuffer, view: &RasterView, visibility: &Buffer) {
+        self.ctx.note_draw();
         let device = &self.ctx.device;
         let clear = [
             vk::ClearValue { color: vk::ClearColorValue { uint32: [0; 4] } },

@@ -1,0 +1,321 @@
+//! The image cells of `kdtrace bench --images`: rendered images against a
+//! converged reference. Knobs that trade time for error — samples per pixel,
+//! diffuse bounces, first hits traced or rasterized, the traversal — each give a
+//! cell with its render time and its error: relative RMSE and SSIM (Wang et al.
+//! 2004, on the tone-mapped luminance) against the reference, rendered once per
+//! scene at `reference_spp` samples and `reference_bounces` bounces.
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::Vec3;
+use plotters::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::kdtree::traverse::Traversal;
+use crate::render::{render, PointLight, Primary, RenderOutput, RenderSettings};
+use crate::scene::{Camera, Scene};
+use crate::trace::Tracer;
+
+/// What the image cells sweep.
+#[derive(Clone, Debug)]
+pub struct ImageOptions {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Samples per pixel of the cells.
+    pub spp: Vec<u32>,
+    /// Diffuse bounces of the cells.
+    pub bounces: Vec<u32>,
+    /// First-hit modes of the cells.
+    pub primaries: Vec<Primary>,
+    /// Traversals of the cells (closest hit; shadow rays use their any-hit twin).
+    pub traversals: Vec<Traversal>,
+    /// Samples per pixel of the reference.
+    pub reference_spp: u32,
+    /// Diffuse bounces of the reference (the most a cell may take).
+    pub reference_bounces: u32,
+}
+
+/// One rendered image and its error.
+#[derive(Clone, Debug)]
+pub struct ImageCell {
+    /// Scene name.
+    pub scene: String,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Diffuse bounces.
+    pub bounces: u32,
+    /// First hits traced or rasterized.
+    pub primary: Primary,
+    /// The traversal.
+    pub traversal: String,
+    /// Wall time of the render call (pipelines compiled already: a warm-up ran).
+    pub seconds: f64,
+    /// GPU time of trace + shade (+ raster) dispatches, when the device gave plausible timestamps.
+    pub gpu_seconds: Option<f64>,
+    /// Rays of all kinds.
+    pub rays: u64,
+    /// RMSE against the reference, relative to the reference's mean.
+    pub rmse: f64,
+    /// Mean SSIM of the tone-mapped luminance (1 = identical).
+    pub ssim: f64,
+}
+
+impl ImageCell {
+    /// The cell's settings in one label.
+    pub fn label(&self) -> String {
+        let primary = if self.primary == Primary::Raster { " raster" } else { "" };
+        format!("{} spp, {} b{primary}, {}", self.spp, self.bounces, self.traversal)
+    }
+}
+
+/// RMSE of `a` against `reference` over all channels, relative to the reference's mean.
+pub fn relative_rmse(a: &[Vec3], reference: &[Vec3]) -> f64 {
+    let n = reference.len().max(1) as f64;
+    let mean = reference.iter().map(|p| f64::from(p.element_sum())).sum::<f64>() / (3.0 * n);
+    let sq: f64 = a.iter().zip(reference).map(|(x, y)| f64::from((*x - *y).length_squared())).sum();
+    (sq / (3.0 * n)).sqrt() / mean.max(f64::MIN_POSITIVE)
+}
+
+/// Mean SSIM over 8×8 windows (stride 4) of the luminance after clamping to [0, 1]
+/// and sRGB encoding, with the usual constants (K1 = 0.01, K2 = 0.03, range 1).
+pub fn ssim(a: &[Vec3], b: &[Vec3], width: u32, height: u32) -> f64 {
+    let luma = |img: &[Vec3]| -> Vec<f64> {
+        img.iter()
+            .map(|c| {
+                let y = f64::from(c.dot(Vec3::new(0.2126, 0.7152, 0.0722))).clamp(0.0, 1.0);
+                if y <= 0.003_130_8 {
+                    12.92 * y
+                } else {
+                    1.055 * y.powf(1.0 / 2.4) - 0.055
+                }
+            })
+            .collect()
+    };
+    let (x, y) = (luma(a), luma(b));
+    let (w, h) = (width as usize, height as usize);
+    let win = 8.min(w).min(h).max(1);
+    let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    let mut wy = 0;
+    loop {
+        let mut wx = 0;
+        loop {
+            let (mut mx, mut my, mut xx, mut yy, mut xy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for j in wy..wy + win {
+                for i in wx..wx + win {
+                    let (p, q) = (x[j * w + i], y[j * w + i]);
+                    mx += p;
+                    my += q;
+                    xx += p * p;
+                    yy += q * q;
+                    xy += p * q;
+                }
+            }
+            let n = (win * win) as f64;
+            let (mx, my) = (mx / n, my / n);
+            let (vx, vy, cov) = (xx / n - mx * mx, yy / n - my * my, xy / n - mx * my);
+            sum += ((2.0 * mx * my + c1) * (2.0 * cov + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2));
+            count += 1;
+            if wx + win >= w {
+                break;
+            }
+            wx = (wx + 4).min(w - win);
+        }
+        if wy + win >= h {
+            break;
+        }
+        wy = (wy + 4).min(h - win);
+    }
+    sum / count.max(1) as f64
+}
+
+/// The point light of the ray matrix's shadow rays, for scenes without emitters,
+/// so that their images have shadows and indirect light to converge.
+fn scene_lights(scene: &Scene) -> Vec<PointLight> {
+    if scene.materials.iter().any(|m| m.is_emissive()) {
+        return Vec::new();
+    }
+    let position = crate::bench::rays::light_position(&scene.bounds);
+    let d2 = (scene.bounds.center() - position).length_squared().max(f32::MIN_POSITIVE);
+    vec![PointLight { position, intensity: Vec3::splat(std::f32::consts::PI * d2) }]
+}
+
+/// Renders the reference and every cell of `options` for one scene.
+/// `progress` hears what is being rendered.
+pub fn run_images(
+    tracer: &mut Tracer,
+    name: &str,
+    scene: &Scene,
+    camera: &Camera,
+    options: &ImageOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<(Vec<ImageCell>, RenderOutput)> {
+    if options.spp.is_empty() || options.bounces.is_empty() || options.primaries.is_empty() {
+        return Err(Error::InvalidInput("--images needs at least one spp, bounce count and primary".into()));
+    }
+    if let Some(b) = options.bounces.iter().find(|&&b| b > options.reference_bounces) {
+        return Err(Error::InvalidInput(format!(
+            "a cell with {b} bounces exceeds the reference's {} (--reference-bounces)",
+            options.reference_bounces
+        )));
+    }
+    let mut base = RenderSettings::new(options.width, options.height);
+    base.lights = scene_lights(scene);
+    base.max_depth = 8.max(options.reference_bounces + 2);
+    progress(&format!("{name}: reference, {} spp, {} bounces", options.reference_spp, options.reference_bounces));
+    let reference_settings =
+        RenderSettings { spp: options.reference_spp, bounces: options.reference_bounces, seed: 0x5eed, ..base.clone() };
+    let reference = render(tracer, scene, camera, &reference_settings, |_, _| {})?;
+    let mut cells = Vec::new();
+    for traversal in &options.traversals {
+        for &primary in &options.primaries {
+            for &bounces in &options.bounces {
+                for &spp in &options.spp {
+                    let settings =
+                        RenderSettings { spp, bounces, primary, traversal: *traversal, seed: 1, ..base.clone() };
+                    let label = crate::bench::matrix::traversal_name(traversal);
+                    progress(&format!("{name}: {spp} spp, {bounces} bounces, {primary:?}, {label}"));
+                    // A one-sample warm-up compiles the pipelines, so the cell times the render alone.
+                    render(tracer, scene, camera, &RenderSettings { spp: 1, ..settings.clone() }, |_, _| {})?;
+                    let start = Instant::now();
+                    let out = render(tracer, scene, camera, &settings, |_, _| {})?;
+                    let seconds = start.elapsed().as_secs_f64();
+                    let s = &out.stats;
+                    let gpu =
+                        s.trace_seconds.zip(s.shade_seconds).map(|(t, sh)| t + sh + s.raster_seconds.unwrap_or(0.0));
+                    cells.push(ImageCell {
+                        scene: name.to_string(),
+                        spp,
+                        bounces,
+                        primary,
+                        traversal: label,
+                        seconds,
+                        gpu_seconds: gpu,
+                        rays: s.rays(),
+                        rmse: relative_rmse(&out.pixels, &reference.pixels),
+                        ssim: ssim(&out.pixels, &reference.pixels, out.width, out.height),
+                    });
+                }
+            }
+        }
+    }
+    Ok((cells, reference))
+}
+
+/// The image cells as a Markdown table.
+pub fn images_table(cells: &[ImageCell]) -> String {
+    let mut s = String::from(
+        "| scene | settings | wall ms | GPU ms | rays | RMSE vs reference | SSIM |\n|---|---|---|---|---|---|---|\n",
+    );
+    for c in cells {
+        s += &format!(
+            "| {} | {} | {:.1} | {} | {} | {:.2} % | {:.4} |\n",
+            c.scene,
+            c.label(),
+            c.seconds * 1e3,
+            c.gpu_seconds.map_or("-".into(), |g| format!("{:.1}", g * 1e3)),
+            c.rays,
+            c.rmse * 100.0,
+            c.ssim
+        );
+    }
+    s
+}
+
+/// The image cells as CSV, one row per cell.
+pub fn write_images_csv(path: &Path, cells: &[ImageCell]) -> Result<()> {
+    let mut s = String::from("scene,spp,bounces,primary,traversal,wall_seconds,gpu_seconds,rays,relative_rmse,ssim\n");
+    for c in cells {
+        s += &format!(
+            "{},{},{},{},{},{:.6},{},{},{:.6},{:.6}\n",
+            c.scene,
+            c.spp,
+            c.bounces,
+            if c.primary == Primary::Raster { "raster" } else { "trace" },
+            c.traversal,
+            c.seconds,
+            c.gpu_seconds.map_or(String::new(), |g| format!("{g:.6}")),
+            c.rays,
+            c.rmse,
+            c.ssim
+        );
+    }
+    std::fs::write(path, s).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+}
+
+/// Render time against RMSE, one panel per scene, every point labelled with its
+/// settings, the Pareto front (no other cell both faster and closer) joined.
+pub fn plot_images(path: &Path, cells: &[ImageCell], title: &str) -> Result<()> {
+    crate::bench::plot::ensure_font()?;
+    let mut scenes: Vec<&str> = Vec::new();
+    for c in cells {
+        if !scenes.contains(&c.scene.as_str()) {
+            scenes.push(&c.scene);
+        }
+    }
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::new(path, (1200, 560 * scenes.len().max(1) as u32 + 40)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (header, body) = root.split_vertically(40);
+        header.titled(title, ("sans-serif", 20))?;
+        for (area, scene) in body.split_evenly((scenes.len().max(1), 1)).iter().zip(&scenes) {
+            let mine: Vec<&ImageCell> = cells.iter().filter(|c| c.scene == *scene).collect();
+            let x_max = mine.iter().map(|c| c.seconds * 1e3).fold(0.0, f64::max).max(1e-3) * 1.6;
+            let x_min = mine.iter().map(|c| c.seconds * 1e3).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / 1.6;
+            let y_max = mine.iter().map(|c| c.rmse * 100.0).fold(0.0, f64::max).max(0.1) * 1.15;
+            let mut chart = ChartBuilder::on(area)
+                .caption(format!("{scene}: render time vs image error"), ("sans-serif", 16))
+                .margin(15)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)?;
+            chart
+                .configure_mesh()
+                .x_desc("render wall time, ms (log scale)")
+                .y_desc("RMSE vs converged reference, % of its mean")
+                .draw()?;
+            let mut sorted: Vec<(f64, f64)> = mine.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect();
+            sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            let mut front = Vec::new();
+            let mut best = f64::INFINITY;
+            for p in sorted {
+                if p.1 < best {
+                    best = p.1;
+                    front.push(p);
+                }
+            }
+            chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?;
+            for c in &mine {
+                let color = if c.primary == Primary::Raster { RGBColor(214, 39, 40) } else { RGBColor(31, 119, 180) };
+                let p = (c.seconds * 1e3, c.rmse * 100.0);
+                chart.draw_series(std::iter::once(Circle::new(p, 4, color.filled())))?;
+                chart.draw_series(std::iter::once(Text::new(c.label(), p, ("sans-serif", 11))))?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| Error::InvalidInput(format!("{}: drawing the chart failed: {e}", path.display())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ssim_is_one_for_equal_images_and_falls_with_noise() {
+        let (w, h) = (24u32, 16u32);
+        let a: Vec<Vec3> = (0..w * h).map(|i| Vec3::splat((i % w) as f32 / w as f32)).collect();
+        assert!((ssim(&a, &a, w, h) - 1.0).abs() < 1e-12);
+        assert_eq!(relative_rmse(&a, &a), 0.0);
+        let mut rng = crate::raygen::SplitMix64(3);
+        let noisy: Vec<Vec3> = a.iter().map(|p| *p + Vec3::splat(0.2 * (rng.next_f32() - 0.5))).collect();
+        let s = ssim(&noisy, &a, w, h);
+        assert!(s < 0.95 && s > 0.0, "{s}");
+        assert!(relative_rmse(&noisy, &a) > 0.05);
+    }
+}
