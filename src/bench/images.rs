@@ -133,13 +133,17 @@ pub fn ssim(a: &[Vec3], b: &[Vec3], width: u32, height: u32) -> f64 {
     sum / count.max(1) as f64
 }
 
-/// The point light of the ray matrix's shadow rays, for scenes without emitters,
-/// so that their images have shadows and indirect light to converge.
-fn scene_lights(scene: &Scene) -> Vec<PointLight> {
+/// A point light for scenes without emitters, so that their images have shadows
+/// and indirect light to converge: the ray matrix's shadow-ray light above the
+/// box, or, for a camera inside the box (an interior such as q3), the eye itself
+/// (a light above the box would not get in).
+fn scene_lights(scene: &Scene, camera: &Camera) -> Vec<PointLight> {
     if scene.materials.iter().any(|m| m.is_emissive()) {
         return Vec::new();
     }
-    let position = crate::bench::rays::light_position(&scene.bounds);
+    let b = &scene.bounds;
+    let inside = camera.eye.cmpge(b.min).all() && camera.eye.cmple(b.max).all();
+    let position = if inside { camera.eye } else { crate::bench::rays::light_position(b) };
     let d2 = (scene.bounds.center() - position).length_squared().max(f32::MIN_POSITIVE);
     vec![PointLight { position, intensity: Vec3::splat(std::f32::consts::PI * d2) }]
 }
@@ -164,12 +168,15 @@ pub fn run_images(
         )));
     }
     let mut base = RenderSettings::new(options.width, options.height);
-    base.lights = scene_lights(scene);
+    base.lights = scene_lights(scene, camera);
     base.max_depth = 8.max(options.reference_bounces + 2);
     progress(&format!("{name}: reference, {} spp, {} bounces", options.reference_spp, options.reference_bounces));
     let reference_settings =
         RenderSettings { spp: options.reference_spp, bounces: options.reference_bounces, seed: 0x5eed, ..base.clone() };
     let reference = render(tracer, scene, camera, &reference_settings, |_, _| {})?;
+    if reference.pixels.iter().all(|p| p.max_element() <= 0.0) {
+        return Err(Error::InvalidInput(format!("{name}: the reference image is black; no light reaches the camera")));
+    }
     let mut cells = Vec::new();
     for traversal in &options.traversals {
         for &primary in &options.primaries {
