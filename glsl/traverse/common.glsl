@@ -166,7 +166,10 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
     bool stopped = false;
     uint unsure = 0u;          // pairs left to f64
     uint first_unsure = count;
-    for (; i < count; ++i) {
+    // Any-hit mode ends the loop by its condition, not by a `break`: on lavapipe a
+    // divergent break here made robust any-hit traversal 1.6x slower than closest
+    // hit for the same work (measured on Cornell box shadow rays).
+    for (; i < count && !(ANY_HIT && stopped); ++i) {
         vec3 v0, v1, v2;
         uint prim = load_triangle(offset + i, v0, v1, v2);
         float t, u, v;
@@ -176,16 +179,14 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
             best.prim_id = prim;
             best.u = u;
             best.v = v;
-            if (ANY_HIT) {
-                stopped = true;
-                break;
-            }
+            if (ANY_HIT) stopped = true;
         } else if (result == TRI_UNSURE) {
             first_unsure = min(first_unsure, i);
             unsure += 1u;
         }
     }
-    c.triangles += stopped ? i + 1u : count;
+    // A stop at triangle k leaves i = k + 1: the triangles tested.
+    c.triangles += stopped ? i : count;
     bool complete = stopped || i == count;
     if (stopped) unsure = 0u;
     uint j = first_unsure;
