@@ -104,6 +104,9 @@ struct RenderArgs {
     /// Also write the linear image as OpenEXR (the output itself is EXR when it ends in .exr).
     #[arg(long)]
     exr: Option<PathBuf>,
+    /// Write the output image every N samples per pixel while rendering (progressive preview).
+    #[arg(long, default_value_t = 0)]
+    checkpoint: u32,
     /// List what the scene and options need and what the renderer skips, then render.
     #[arg(long)]
     explain: bool,
@@ -508,18 +511,47 @@ fn render(args: RenderArgs) -> Result<()> {
         bar.finish_and_clear();
         out
     };
-    let out = render_once(&mut tracer, &settings)?;
+    let is_exr = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    let save = |pixels: &[Vec3]| -> Result<()> {
+        if is_exr {
+            kdtrace::render::save_exr(&args.output, pixels, args.width, args.height)?;
+        } else {
+            let image = kdtrace::render::tone_map(pixels, args.width, args.height, args.exposure);
+            image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
+        }
+        Ok(())
+    };
+    let out = if args.checkpoint > 0 {
+        let bar = ProgressBar::new(u64::from(settings.spp));
+        bar.set_style(
+            ProgressStyle::with_template("rendering {bar:40} {pos}/{len} sample passes {elapsed} {msg}").unwrap(),
+        );
+        let out = kdtrace::render::render_progressive(
+            &mut tracer,
+            &scene,
+            &camera,
+            &settings,
+            args.checkpoint,
+            |done, total| {
+                bar.set_length(total);
+                bar.set_position(done);
+            },
+            |samples, pixels| {
+                save(pixels).map_err(|e| kdtrace::Error::InvalidInput(format!("{e:#}")))?;
+                bar.set_message(format!("(wrote {} at {samples} spp)", args.output.display()));
+                Ok(())
+            },
+        );
+        bar.finish_and_clear();
+        out?
+    } else {
+        render_once(&mut tracer, &settings)?
+    };
     if args.compare {
         compare_renders(&ctx, &tree, &scene, &settings, &out, render_once)?;
     }
 
-    let is_exr = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    if is_exr {
-        kdtrace::render::save_exr(&args.output, &out.pixels, out.width, out.height)?;
-    } else {
-        let image = kdtrace::render::tone_map(&out.pixels, out.width, out.height, args.exposure);
-        image.save(&args.output).with_context(|| format!("writing {}", args.output.display()))?;
-    }
+    save(&out.pixels)?;
     if let Some(exr) = &args.exr {
         kdtrace::render::save_exr(exr, &out.pixels, out.width, out.height)?;
     }

@@ -555,3 +555,40 @@ fn rasterized_first_hits_agree_with_traced_ones() {
         assert_eq!(rastered.stats.secondary_rays, traced.stats.secondary_rays.min(rastered.stats.secondary_rays));
     }
 }
+
+#[test]
+fn a_progressive_checkpoint_is_the_render_of_that_many_samples() {
+    // Sample k of a pixel does not depend on the total count, and the device sums
+    // samples in order: the checkpoint after 4 of 8 samples is, bit for bit, the
+    // 4-sample render.
+    let scene = Scene::load(&common::scene_path("cornell_box.obj")).unwrap();
+    let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let ctx = common::context();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let mut settings = RenderSettings::new(32, 24);
+    settings.spp = 8;
+    settings.bounces = 1;
+    let mut checkpoints = Vec::new();
+    let full = kdtrace::render::render_progressive(
+        &mut tracer,
+        &scene,
+        &camera,
+        &settings,
+        4,
+        |_, _| {},
+        |n, image| {
+            checkpoints.push((n, image.to_vec()));
+            Ok(())
+        },
+    )
+    .unwrap();
+    settings.spp = 4;
+    let four = render(&mut tracer, &scene, &camera, &settings, |_, _| {}).unwrap();
+    drop(tracer);
+    common::assert_validation_clean(&ctx);
+    assert_eq!(checkpoints.len(), 1, "one checkpoint (at 4 samples; the 8th is the result)");
+    assert_eq!(checkpoints[0].0, 4);
+    assert!(checkpoints[0].1 == four.pixels, "the 4-sample checkpoint differs from the 4-sample render");
+    assert!(full.pixels != four.pixels);
+}

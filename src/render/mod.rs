@@ -9,7 +9,8 @@ use std::path::Path;
 use glam::Vec3;
 
 pub use wavefront::{
-    ld2, render, PointLight, Primary, RenderOutput, RenderParams, RenderPlan, RenderSettings, RenderStats, MAX_LIGHTS,
+    ld2, render, render_progressive, PointLight, Primary, RenderOutput, RenderParams, RenderPlan, RenderSettings,
+    RenderStats, MAX_LIGHTS,
 };
 
 use crate::geom::{Hit, Ray};

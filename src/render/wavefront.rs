@@ -621,7 +621,24 @@ pub fn render(
     scene: &Scene,
     camera: &Camera,
     settings: &RenderSettings,
+    progress: impl FnMut(u64, u64),
+) -> Result<RenderOutput> {
+    render_progressive(tracer, scene, camera, settings, 0, progress, |_, _| Ok(()))
+}
+
+/// [`render`], and every `every` samples per pixel (0: never) hands
+/// `checkpoint(samples, image)` the mean of the samples so far (row-major
+/// linear radiance), e.g. to write a progressive preview. Images that render in
+/// several chunks (more than 2^20 pixels) get no checkpoints: their pixels do not
+/// all reach a sample count at the same time.
+pub fn render_progressive(
+    tracer: &mut Tracer,
+    scene: &Scene,
+    camera: &Camera,
+    settings: &RenderSettings,
+    every: u32,
     mut progress: impl FnMut(u64, u64),
+    mut checkpoint: impl FnMut(u32, &[Vec3]) -> Result<()>,
 ) -> Result<RenderOutput> {
     let setup_start = Instant::now();
     let plan = RenderPlan::new(scene, settings)?;
@@ -1017,6 +1034,21 @@ pub fn render(
             }
             done += 1;
             progress(done, total);
+            let samples = sample + 1;
+            if every > 0 && chunks == 1 && samples % every == 0 && samples < settings.spp {
+                // SAFETY: as above.
+                unsafe {
+                    ctx.submit_and_wait(|cmd| {
+                        let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: pixel_count * 16 }];
+                        device.cmd_copy_buffer(cmd, accum.buffer, readback.buffer, &region);
+                        host_barrier(&ctx, cmd);
+                    })?;
+                }
+                let sums: &[[f32; 4]] = bytemuck::cast_slice(readback.read(0, (pixel_count * 16) as usize)?);
+                let scale = 1.0 / samples as f32;
+                let partial: Vec<Vec3> = sums.iter().map(|s| Vec3::new(s[0], s[1], s[2]) * scale).collect();
+                checkpoint(samples, &partial)?;
+            }
         }
     }
     // SAFETY: as above.
