@@ -27,7 +27,11 @@ void main() {
     uint pixel = pixels[floatBitsToUint(p.eye.w) + i];   // eye.w: this chunk's first pixel
     uint x = pixel % p.width;
     uint y = pixel / p.width;
-    vec2 jitter = JITTER == 0u ? vec2(0.5) : ld2(JITTER == 1u ? pixel : 0u, p.sample_index, 0u, p.seed);
+    // Mode 2 takes the jitter the host computed for the rasterizer's projection
+    // (right.w, up.w), so both use one value.
+    vec2 jitter = JITTER == 0u ? vec2(0.5)
+                : JITTER == 1u ? ld2(pixel, p.sample_index, 0u, p.seed)
+                               : vec2(p.right.w, p.up.w);
     float sx = 2.0 * (float(x) + jitter.x) / float(p.width) - 1.0;
     float sy = 1.0 - 2.0 * (float(y) + jitter.y) / float(p.height);
     Ray ray;

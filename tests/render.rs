@@ -36,60 +36,6 @@ fn cube(lo: Vec3, hi: Vec3) -> Vec<[Vec3; 3]> {
     .concat()
 }
 
-/// An icosphere of `radius` around the origin: the icosahedron subdivided
-/// `levels` times, vertices pushed onto the sphere.
-fn icosphere(radius: f32, levels: u32) -> Vec<[Vec3; 3]> {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let v = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .map(|(x, y, z)| Vec3::new(x, y, z).normalize());
-    let faces = [
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    let mut tris: Vec<[Vec3; 3]> = faces.iter().map(|f| f.map(|i| v[i])).collect();
-    for _ in 0..levels {
-        tris = tris
-            .iter()
-            .flat_map(|&[a, b, c]| {
-                let (ab, bc, ca) = ((a + b).normalize(), (b + c).normalize(), (c + a).normalize());
-                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
-            })
-            .collect();
-    }
-    tris.iter().map(|t| t.map(|p| p * radius)).collect()
-}
-
 fn material(name: &str, kd: Vec3, ks: Vec3, illum: u32, ke: Vec3) -> Material {
     Material { name: name.into(), kd, ks, ns: 0.0, illum, ke }
 }
@@ -144,7 +90,7 @@ fn white_furnace_every_pixel_has_the_known_radiance() {
     // on a box, points near an edge see the next face at distance → 0, and the
     // area-light estimate's variance has no bound.)
     let e = 0.25;
-    let sphere = icosphere(1.0, 3);
+    let sphere = common::sphere(3, 0.0, 1);
     for (albedo, bounces, expected) in [(1.0f32, 2u32, 4.0 * e), (0.5, 3, e * 1.9375), (1.0, 0, 2.0 * e)] {
         let scene = scene_of(
             sphere.clone(),
@@ -517,10 +463,8 @@ fn rasterized_first_hits_agree_with_traced_ones() {
         let mut far_apart: Vec<(usize, Hit, Hit, f64)> = Vec::new();
         for (i, (ta, rb)) in a.iter().zip(&b).enumerate() {
             if ta.prim_id == rb.prim_id {
-                assert!(
-                    ta.t == rb.t && ta.u == rb.u && ta.v == rb.v || rastered.stats.raster_edge_pixels > 0,
-                    "{name}: pixel {i}: {ta:?} vs {rb:?}"
-                );
+                // Both found this triangle with the same watertight test on the same ray.
+                assert!(ta.t == rb.t && ta.u == rb.u && ta.v == rb.v, "{name}: pixel {i}: {ta:?} vs {rb:?}");
                 continue;
             }
             ties += 1;
@@ -552,7 +496,15 @@ fn rasterized_first_hits_agree_with_traced_ones() {
         );
         assert!(ties * 200 <= total, "{name}: {ties} of {total} pixels differ");
         assert!(far_apart.is_empty(), "{name}: hits far apart: {:?}", &far_apart[..far_apart.len().min(5)]);
-        assert_eq!(rastered.stats.secondary_rays, traced.stats.secondary_rays.min(rastered.stats.secondary_rays));
+        // Jittered samples: the projection and the camera rays take the same
+        // per-sample jitter, so edge ties stay as rare as at the pixel centres.
+        settings.spp = 4;
+        let jittered = render_scene(&scene, &camera, &settings);
+        assert!(
+            jittered.stats.raster_edge_pixels * 200 <= 4 * total as u64,
+            "{name}: {} edge ties in 4 jittered samples",
+            jittered.stats.raster_edge_pixels
+        );
     }
 }
 

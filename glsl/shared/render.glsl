@@ -56,8 +56,8 @@ struct PointLight {
 struct RenderParams {
     vec4 eye;          // camera: xyz eye
     vec4 forward;      // xyz forward (unit); w: total emitter weight (sum of area x luminance of Ke)
-    vec4 right;        // xyz right * tan(fov/2) * aspect
-    vec4 up;           // xyz up * tan(fov/2)
+    vec4 right;        // xyz right * tan(fov/2) * aspect; w: this sample's jitter x (one per image)
+    vec4 up;           // xyz up * tan(fov/2); w: this sample's jitter y (one per image)
     vec4 background;   // xyz radiance of rays that leave the scene; w ambient radiance (AO)
     uint width;
     uint height;

@@ -285,16 +285,8 @@ pub fn plot_images(path: &Path, cells: &[ImageCell], title: &str) -> Result<()> 
                 .x_desc("render wall time, ms (log scale)")
                 .y_desc("RMSE vs converged reference, % of its mean")
                 .draw()?;
-            let mut sorted: Vec<(f64, f64)> = mine.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect();
-            sorted.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-            let mut front = Vec::new();
-            let mut best = f64::INFINITY;
-            for p in sorted {
-                if p.1 < best {
-                    best = p.1;
-                    front.push(p);
-                }
-            }
+            let front =
+                crate::bench::plot::pareto_front(mine.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect());
             chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?;
             for c in &mine {
                 let color = if c.primary == Primary::Raster { RGBColor(214, 39, 40) } else { RGBColor(31, 119, 180) };
@@ -312,6 +304,12 @@ pub fn plot_images(path: &Path, cells: &[ImageCell], title: &str) -> Result<()> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pareto_front_keeps_only_points_no_faster_point_beats() {
+        let front = crate::bench::plot::pareto_front(vec![(3.0, 1.0), (1.0, 5.0), (2.0, 6.0), (2.5, 2.0), (4.0, 1.0)]);
+        assert_eq!(front, vec![(1.0, 5.0), (2.5, 2.0), (3.0, 1.0)]);
+    }
 
     #[test]
     fn ssim_is_one_for_equal_images_and_falls_with_noise() {

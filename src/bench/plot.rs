@@ -15,6 +15,19 @@ use crate::error::{Error, Result};
 const FONT_PATHS: [&str; 2] =
     ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
 
+/// The Pareto front of (time, error) points: sorted by time, each point more
+/// accurate than every faster one.
+pub fn pareto_front(mut points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    points.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut best = f64::INFINITY;
+    points.retain(|p| {
+        let keep = p.1 < best;
+        best = best.min(p.1);
+        keep
+    });
+    points
+}
+
 /// Registers the charts' font once per process.
 pub fn ensure_font() -> Result<()> {
     static DONE: std::sync::OnceLock<std::result::Result<(), String>> = std::sync::OnceLock::new();
@@ -110,17 +123,7 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
                 .x_desc("trace ns per ray (median, log scale)")
                 .y_desc("rays disagreeing with the exact reference, %")
                 .draw()?;
-            // The Pareto front: sorted by time, each point more accurate than all faster ones.
-            let mut sorted = points.clone();
-            sorted.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)));
-            let mut front = Vec::new();
-            let mut best = f64::INFINITY;
-            for p in &sorted {
-                if p.3 < best {
-                    best = p.3;
-                    front.push((p.2, p.3));
-                }
-            }
+            let front = pareto_front(points.iter().map(|p| (p.2, p.3)).collect());
             chart
                 .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
                 .label("Pareto front")

@@ -214,8 +214,10 @@ fn sobol_second(index: u32) -> u32 {
     result
 }
 
-/// The host twin of `ld2` in `render.glsl` (same bits): the point of the
-/// scrambled 2D Sobol set for (`pixel`, `sample`, dimension `pair`, `seed`).
+/// The host twin of `ld2` in `render.glsl` (same construction): the point of
+/// the scrambled 2D Sobol set for (`pixel`, `sample`, dimension `pair`, `seed`).
+/// Used for the one jitter per sample of rasterized first hits, which the host
+/// passes to both the projection and the camera rays.
 pub fn ld2(pixel: u32, sample: u32, pair: u32, seed: u32) -> [f32; 2] {
     let h = hash_u32(pixel.wrapping_mul(0x9e37_79b9) ^ hash_u32(pair.wrapping_mul(0x85eb_ca6b) ^ hash_u32(seed)));
     let i = owen_scramble(sample, h);
@@ -232,9 +234,10 @@ pub struct RenderParams {
     pub eye: [f32; 4],
     /// xyz: unit view direction; w: the emitters' total weight (Σ area × luminance of Ke).
     pub forward: [f32; 4],
-    /// xyz: right × tan(fov/2) × aspect.
+    /// xyz: right × tan(fov/2) × aspect; w: the sample's jitter x when one
+    /// jitter serves the whole image (rasterized first hits).
     pub right: [f32; 4],
-    /// xyz: up × tan(fov/2).
+    /// xyz: up × tan(fov/2); w: that jitter's y.
     pub up: [f32; 4],
     /// xyz: background radiance; w: ambient radiance (ambient occlusion).
     pub background: [f32; 4],
@@ -938,6 +941,11 @@ pub fn render_progressive(
         params.eye[3] = f32::from_bits(first_pixel as u32);
         for sample in 0..settings.spp {
             params.sample_index = sample;
+            // One jitter per sample for the whole image when first hits are
+            // rasterized: computed here once, for the projection and the camera rays.
+            let jitter = if plan.jitter { ld2(0, sample, 0, settings.seed) } else { [0.5, 0.5] };
+            params.right[3] = jitter[0];
+            params.up[3] = jitter[1];
             // Submission 1: camera rays, their trace (or hits from the visibility buffer) and shade.
             let mut pass = Pass::new(&ctx, timestamps.as_ref());
             unsafe {
@@ -950,7 +958,6 @@ pub fn render_progressive(
                     match &raster {
                         None => pass.trace(cmd, || tracer.record_binding(cmd, &trace_sets[0], chunk_pixels)),
                         Some((rasterizer, visibility, kernel, set)) => {
-                            let jitter = if plan.jitter { ld2(0, sample, 0, settings.seed) } else { [0.5, 0.5] };
                             let view = RasterView::new(camera.pinhole(width, height), jitter, width, height, near);
                             pass.raster(cmd, || rasterizer.record(cmd, &view, visibility));
                             pass.raster(cmd, || {
