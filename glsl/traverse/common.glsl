@@ -140,6 +140,61 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     return VISIT_BOTH;
 }
 
+// Exact restarts (ROBUST; `restart`, `push-down` and a short stack run empty):
+// instead of starting again at a t value - at a vertex or edge of cells several
+// leaves end within one float of each other, and a t cannot order them - find the
+// entry a full stack would pop after `leaf`. Descend again from `start` (an
+// ancestor of the leaf with no pending entry above it, whose stack segment is
+// [s0, s1]) along the path to the leaf, with the stack's own decisions: the entry
+// is the far child of the deepest node where the path took the near side of a
+// split that needed both children. `done`: the leaf held the closest hit, and
+// only entries that start before it count (the stack's drop rule). Returns
+// SUCCESSOR_NONE when there is none (traversal is over); `shallowest` tells that
+// no other entry is pending above the one found.
+#define SUCCESSOR_NONE 0u
+#define SUCCESSOR_FOUND 1u
+#define SUCCESSOR_CUT 2u
+uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool done, float best_t,
+                     out uint next, out float next_t0, out float next_t1, out bool shallowest,
+                     inout TraceCounters c, inout uint step) {
+    uint node = start;
+    float t0 = s0;
+    float t1 = s1;
+    uint pending = 0u;
+    bool found = false;
+    next = 0u;
+    next_t0 = 0.0;
+    next_t1 = 0.0;
+    shallowest = false;
+    while (node != leaf) {
+        if (step >= MAX_TRAVERSAL_STEPS) return SUCCESSOR_CUT;
+        uvec2 n = fetch_node(node, c);
+        ++step;
+        uint near, far;
+        float ts;
+        uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
+        uint child = leaf >= node_above_child(n) ? node_above_child(n) : node + 1u;
+        if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) {
+            float far_t0 = visit == VISIT_BOTH ? ts : t0;
+            if (child == near) {
+                if (!done || far_t0 < best_t) {
+                    found = true;
+                    next = far;
+                    next_t0 = far_t0;
+                    next_t1 = t1;
+                    shallowest = pending == 0u;
+                }
+                pending += 1u;
+                if (visit == VISIT_BOTH) t1 = ts;
+            } else {
+                t0 = far_t0;
+            }
+        }
+        node = child;
+    }
+    return found ? SUCCESSOR_FOUND : SUCCESSOR_NONE;
+}
+
 // Loads the triangle of the leaf reference `index` (stored in prim_indices
 // order, the prim id inline).
 uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {

@@ -2,11 +2,13 @@
 // node (Horn et al. 2007): the deepest node reached before the first decision
 // that needed both children. Its region holds the whole rest of the segment, so
 // the levels above it are never visited again.
+// With ROBUST on, restarts are exact (trace_restart_exact in restart.glsl).
 // CPU twin: `trace_push_down` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_PUSH_DOWN_GLSL
 #define TRAVERSE_PUSH_DOWN_GLSL
 
 bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, true, best, c);
     uint node = 0u;
     float t1 = t1_scene;
     float t0_restart = t0;  // where the segment started at the last restart

@@ -3,11 +3,67 @@
 // again at the root. Progress: after a restart the plane the last leaf was left
 // through goes far on a tie, planes before t0 are passed, and the restart point
 // always moves forward (restart_point in common.glsl), so restarts end.
-// CPU twin: `trace_restart` in src/kdtree/traverse.rs.
+// That is the paper's algorithm, run when ROBUST is off. With ROBUST on, restarts
+// are exact (trace_restart_exact below) and visit what `stack` visits.
+// CPU twins: `trace_restart` and `trace_restart_exact` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_RESTART_GLSL
 #define TRAVERSE_RESTART_GLSL
 
+// Exact restarts for `restart` and (use_push_down) `push-down`: every restart
+// finds the entry a full stack would pop next (stack_successor in common.glsl) by
+// descending again from the restart node to the leaf just left, so the leaves,
+// their order and their segments are the stack's, and so are the answers. The
+// cost is that second descent below the entry's node. The push-down node is the
+// deepest node above which no entry is pending, kept with its stack segment.
+bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, inout Hit best,
+                         inout TraceCounters c) {
+    uint node = 0u;
+    uint restart_node = 0u;
+    float restart_t0 = t0;
+    float restart_t1 = t1;
+    bool push_down = use_push_down;
+    uint step = 0u;
+    while (step < MAX_TRAVERSAL_STEPS) {
+        uvec2 n = fetch_node(node, c);
+        ++step;
+        while (!node_is_leaf(n)) {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
+            node = visit == VISIT_FAR ? far : near;
+            if (visit == VISIT_BOTH) t1 = ts;
+            if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) push_down = false;
+            if (push_down) {
+                restart_node = node;
+                restart_t0 = t0;
+                restart_t1 = t1;
+            }
+            if (step >= MAX_TRAVERSAL_STEPS) return false;
+            n = fetch_node(node, c);
+            ++step;
+        }
+        uint leaf = visit_leaf(r, n, t1, best, c);
+        if (leaf == LEAF_CUT) return false;
+        if (leaf == LEAF_DONE && ANY_HIT) return true;
+        uint next;
+        bool shallowest;
+        uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
+                                     next, t0, t1, shallowest, c, step);
+        if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
+        node = next;
+        push_down = use_push_down && shallowest;
+        if (push_down) {
+            restart_node = node;
+            restart_t0 = t0;
+            restart_t1 = t1;
+        }
+        c.restarts += 1u;
+    }
+    return false;
+}
+
 bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, false, best, c);
     uint node = 0u;
     float t1 = t1_scene;
     float t0_restart = t0;  // where the segment started at the last restart

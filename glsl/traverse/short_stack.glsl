@@ -2,6 +2,8 @@
 // STACK_SIZE entries; a push onto a full stack overwrites (drops) the oldest
 // entry; when the stack runs empty before the segment ends, restart behind the
 // last leaf — at the root, or at the push-down node when `use_push_down`.
+// With ROBUST on, that restart is exact (stack_successor in common.glsl): the
+// leaves and answers are the full stack's.
 // CPU twin: `trace_short_stack` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_SHORT_STACK_GLSL
 #define TRAVERSE_SHORT_STACK_GLSL
@@ -20,6 +22,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     uvec2 exit_plane = NO_PLANE;  // the plane the last leaf was left through
     uvec2 t1_plane = NO_PLANE;    // the plane the current segment ends at
     uint restart_node = 0u;
+    float restart_t0 = t0;  // the restart node's stack segment (exact restarts)
+    float restart_t1 = t1_scene;
     bool push_down = use_push_down;
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
@@ -53,7 +57,11 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 node = near;
                 push_down = false;
             }
-            if (push_down) restart_node = node;
+            if (push_down) {
+                restart_node = node;
+                restart_t0 = t0;
+                restart_t1 = t1;
+            }
             if (step >= MAX_TRAVERSAL_STEPS) return false;
             n = fetch_node(node, c);
             ++step;
@@ -68,7 +76,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
             }
-            if (count == 0u) return true;
+            if (count == 0u && !ROBUST) return true;
         }
         if (count > 0u) {
             head = (head + STACK_SIZE - 1u) % STACK_SIZE;
@@ -77,6 +85,22 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             t0 = stack_t0[head];
             t1 = stack_t1[head];
             t1_plane = stack_plane[head];
+            continue;
+        }
+        if (ROBUST) {
+            uint next;
+            bool shallowest;
+            uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
+                                         next, t0, t1, shallowest, c, step);
+            if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
+            node = next;
+            push_down = use_push_down && shallowest;
+            if (push_down) {
+                restart_node = node;
+                restart_t0 = t0;
+                restart_t1 = t1;
+            }
+            c.restarts += 1u;
             continue;
         }
         if (t1 >= t1_scene) return true;

@@ -122,6 +122,9 @@ pub struct Traversal {
     /// rounding error. Off: plain f32 decisions and the f64 recompute only at an
     /// edge function of exactly 0 (Woop, Benthin & Wald 2013) — to measure what
     /// the measures cost. A specialization constant: no cost when off.
+    ///
+    /// With it on, the restart-based variants also restart exactly (see
+    /// [`Traversal::follows_stack`]); off, they restart at a t value as in the papers.
     pub robust: bool,
 }
 
@@ -129,6 +132,17 @@ impl Traversal {
     /// Closest hit with `variant`, the paper's short stack of 3, single rays.
     pub fn closest(variant: Variant) -> Self {
         Traversal { variant, stack_size: 3, any_hit: false, packet_width: 1, subgroup_size: None, robust: true }
+    }
+
+    /// True when this traversal visits the leaves a full stack visits, in the same
+    /// order and with the same segments, and so returns the stack's hits bit for
+    /// bit: `restart`, `push-down` and the short stacks on single rays with
+    /// `robust` on. Their restarts do not start again at a t value (which cannot
+    /// order cells that meet at a vertex or edge the ray passes within a float of)
+    /// but descend again to the leaf just left to find the entry a full stack would
+    /// pop next. `backtrack`, `ropes` and packets restart at a t value.
+    pub fn follows_stack(&self) -> bool {
+        self.robust && !self.uses_packets() && !self.variant.uses_links()
     }
 
     /// True when the kernel traces packets with this traversal.
@@ -521,8 +535,94 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     false
 }
 
+/// What [`stack_successor`] found: the entry a full stack pops next, none (the
+/// traversal is over), or the step limit.
+enum Successor {
+    None,
+    Found { node: u32, t0: f32, t1: f32, shallowest: bool },
+    Cut,
+}
+
+/// Twin of `stack_successor` in common.glsl: the entry a full stack would pop
+/// after `leaf`, found by descending again from `start` (segment `[s0, s1]`)
+/// along the path to the leaf with the stack's decisions.
+fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, done: bool) -> Successor {
+    let (mut node, mut t0, mut t1) = (start, s0, s1);
+    let mut pending = 0u32;
+    let mut found = Successor::None;
+    while node != leaf {
+        if s.c.steps >= MAX_TRAVERSAL_STEPS {
+            return Successor::Cut;
+        }
+        let n = s.fetch(node);
+        let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
+        let child = if leaf >= n.above_child() { n.above_child() } else { node + 1 };
+        if matches!(visit, Visit::Both | Visit::BothSame) {
+            let far_t0 = if visit == Visit::Both { ts } else { t0 };
+            if child == near {
+                if !done || starts_before(far_t0, s.best.t) {
+                    found = Successor::Found { node: far, t0: far_t0, t1, shallowest: pending == 0 };
+                }
+                pending += 1;
+                if visit == Visit::Both {
+                    t1 = ts;
+                }
+            } else {
+                t0 = far_t0;
+            }
+        }
+        node = child;
+    }
+    found
+}
+
+/// Twin of `trace_restart_exact` in glsl/traverse/restart.glsl: `restart` and
+/// `push-down` with exact restarts (robust mode), visiting what `trace_stack` visits.
+fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: bool) -> bool {
+    let mut node = 0u32;
+    let (mut restart_node, mut restart_t0, mut restart_t1) = (0u32, t0, t1);
+    let mut push_down = use_push_down;
+    while s.c.steps < MAX_TRAVERSAL_STEPS {
+        let n = s.fetch(node);
+        if !n.is_leaf() {
+            let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
+            node = if visit == Visit::Far { far } else { near };
+            if visit == Visit::Both {
+                t1 = ts;
+            }
+            if matches!(visit, Visit::Both | Visit::BothSame) {
+                push_down = false;
+            }
+            if push_down {
+                (restart_node, restart_t0, restart_t1) = (node, t0, t1);
+            }
+            continue;
+        }
+        let done = s.leaf(n, t1);
+        if done && s.r.any_hit {
+            return true;
+        }
+        match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
+            Successor::None => return true,
+            Successor::Cut => return false,
+            Successor::Found { node: next, t0: n0, t1: n1, shallowest } => {
+                (node, t0, t1) = (next, n0, n1);
+                push_down = use_push_down && shallowest;
+                if push_down {
+                    (restart_node, restart_t0, restart_t1) = (node, t0, t1);
+                }
+            }
+        }
+        s.c.restarts += 1;
+    }
+    false
+}
+
 /// Twin of `trace_restart` in glsl/traverse/restart.glsl.
 fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
+    if s.r.wr.robust {
+        return trace_restart_exact(s, t0, t1_scene, false);
+    }
     let mut node = 0u32;
     let mut t1 = t1_scene;
     let mut t0_restart = t0; // where the segment started at the last restart
@@ -559,6 +659,9 @@ fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
 
 /// Twin of `trace_push_down` in glsl/traverse/push_down.glsl.
 fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
+    if s.r.wr.robust {
+        return trace_restart_exact(s, t0, t1_scene, true);
+    }
     let mut node = 0u32;
     let mut t1 = t1_scene;
     let mut t0_restart = t0; // where the segment started at the last restart
@@ -616,8 +719,10 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
     let mut exit_plane = ExitPlane::None; // the plane the last leaf was left through
     let mut t1_plane = ExitPlane::None; // the plane the current segment ends at
     let mut restart_node = 0u32;
+    // The restart node's stack segment (exact restarts).
+    let (mut restart_t0, mut restart_t1) = (t0, t1_scene);
     let mut push_down = use_push_down;
-    for _ in 0..MAX_TRAVERSAL_STEPS {
+    while s.c.steps < MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
@@ -647,11 +752,12 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 }
             }
             if push_down {
-                restart_node = node;
+                (restart_node, restart_t0, restart_t1) = (node, t0, t1);
             }
             continue;
         }
-        if s.leaf(n, t1) {
+        let done = s.leaf(n, t1);
+        if done {
             if s.r.any_hit {
                 return true;
             }
@@ -660,7 +766,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 head = (head + size - 1) % size;
                 count -= 1;
             }
-            if count == 0 {
+            if count == 0 && !s.r.wr.robust {
                 return true;
             }
         }
@@ -668,6 +774,21 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
             head = (head + size - 1) % size;
             count -= 1;
             (node, t0, t1, t1_plane) = stack[head];
+            continue;
+        }
+        if s.r.wr.robust {
+            match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
+                Successor::None => return true,
+                Successor::Cut => return false,
+                Successor::Found { node: next, t0: n0, t1: n1, shallowest } => {
+                    (node, t0, t1) = (next, n0, n1);
+                    push_down = use_push_down && shallowest;
+                    if push_down {
+                        (restart_node, restart_t0, restart_t1) = (node, t0, t1);
+                    }
+                }
+            }
+            s.c.restarts += 1;
             continue;
         }
         if t1 >= t1_scene {
