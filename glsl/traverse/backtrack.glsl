@@ -2,15 +2,21 @@
 // without a hit inside it, climb the parent links (side buffer) to the first
 // ancestor whose box (side buffer) the ray leaves after the leaf's exit, and
 // descend from there with [leaf exit, ancestor exit].
+// With ROBUST on, a climb or descent that meets a plane within rounding of the
+// leaf exit (other than the plane just crossed), or a ray inside a split plane,
+// finishes with exact restarts from there (see near_t0 in common.glsl).
 // CPU twin: `trace_backtrack` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_BACKTRACK_GLSL
 #define TRAVERSE_BACKTRACK_GLSL
 
 bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    float t_scene0 = t0;
     uint node = 0u;
     float t1 = t1_scene;
     // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
     uvec2 exit_plane = EXACT_PLANE;
+    uvec2 t1_plane = NO_PLANE;  // ROBUST: the plane the segment ends at, when known
+    uvec2 crossed = NO_PLANE;   // ROBUST: the plane the last leaf was left through
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -20,10 +26,15 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
+            if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
+                return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
+            }
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
                 node = near;
+                // A split clamped into the segment names no plane the segment ends at.
+                t1_plane = ts == t0 || ts == t1 ? NO_PLANE : node_plane(n);
                 t1 = ts;
             } else {
                 node = near;
@@ -37,17 +48,23 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
         // Climb to the first ancestor the ray leaves after t1.
         t0 = t1;
+        crossed = t1_plane;
         float exit_t = t0;
+        uint face = 0u;
         uint depth = 0u;
+        bool ambiguous = false;
         for (; exit_t <= t0 && node != 0u && depth < MAX_STACK; ++depth) {
             node = parents[node];
             c.nodes += 1u;
-            uint face;
-            exit_t = box_exit(r, node, face);
+            float t_next;
+            exit_t = box_exit(r, node, face, t_next);
+            if (ROBUST && near_t0(exit_t, t0) && any(notEqual(box_face_plane(node, face), crossed))) ambiguous = true;
         }
         if (exit_t <= t0 && node != 0u && depth < MAX_STACK) return false;  // climb cut short
+        if (ambiguous) return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
         if (exit_t <= t0) return true;  // the root's box ends here: nothing left
         t1 = min(min(exit_t, t1_scene), best.t);
+        t1_plane = t1 == exit_t ? box_face_plane(node, face) : NO_PLANE;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }

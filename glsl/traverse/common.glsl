@@ -149,13 +149,13 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
 // is the far child of the deepest node where the path took the near side of a
 // split that needed both children. `done`: the leaf held the closest hit, and
 // only entries that start before it count (the stack's drop rule). Returns
-// SUCCESSOR_NONE when there is none (traversal is over); `shallowest` tells that
-// no other entry is pending above the one found.
+// SUCCESSOR_NONE when there is none (traversal is over); `above` counts the
+// entries still pending above the one found.
 #define SUCCESSOR_NONE 0u
 #define SUCCESSOR_FOUND 1u
 #define SUCCESSOR_CUT 2u
 uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool done, float best_t,
-                     out uint next, out float next_t0, out float next_t1, out bool shallowest,
+                     out uint next, out float next_t0, out float next_t1, out uint above,
                      inout TraceCounters c, inout uint step) {
     uint node = start;
     float t0 = s0;
@@ -165,7 +165,7 @@ uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool
     next = 0u;
     next_t0 = 0.0;
     next_t1 = 0.0;
-    shallowest = false;
+    above = 0u;
     while (node != leaf) {
         if (step >= MAX_TRAVERSAL_STEPS) return SUCCESSOR_CUT;
         uvec2 n = fetch_node(node, c);
@@ -182,7 +182,7 @@ uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool
                     next = far;
                     next_t0 = far_t0;
                     next_t1 = t1;
-                    shallowest = pending == 0u;
+                    above = pending;
                 }
                 pending += 1u;
                 if (visit == VISIT_BOTH) t1 = ts;
@@ -274,10 +274,12 @@ uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounte
 }
 
 // Distance at which the ray leaves a node box (side buffer node_boxes): the
-// nearest far plane; `face` is 2*axis (+1 for the max face). Axes with a zero
-// direction component never end the segment.
-float box_exit(TraceRay r, uint node, out uint face) {
+// nearest far plane; `face` is 2*axis (+1 for the max face), `t_next` the next
+// far plane (+inf when none). Axes with a zero direction component never end
+// the segment.
+float box_exit(TraceRay r, uint node, out uint face, out float t_next) {
     float t_exit = uintBitsToFloat(0x7f800000u);
+    t_next = t_exit;
     face = 0u;
     for (uint axis = 0u; axis < 3u; ++axis) {
         float d = r.dir[axis];
@@ -286,11 +288,38 @@ float box_exit(TraceRay r, uint node, out uint face) {
         float plane = node_boxes[node * 6u + axis + (positive ? 3u : 0u)];
         precise float t = (plane - r.origin[axis]) * r.inv_dir[axis];
         if (t < t_exit) {
+            t_next = t_exit;
             t_exit = t;
             face = 2u * axis + (positive ? 1u : 0u);
+        } else if (t < t_next) {
+            t_next = t;
         }
     }
     return t_exit;
+}
+
+// The plane of face `face` of a node's box, as node_plane names split planes.
+uvec2 box_face_plane(uint node, uint face) {
+    uint axis = face >> 1u;
+    return uvec2(axis, floatBitsToUint(node_boxes[node * 6u + axis + ((face & 1u) != 0u ? 3u : 0u)]));
+}
+
+// Robust `backtrack` and `ropes` walk cells by t values, which cannot order the
+// cells around a vertex or edge that the ray passes within rounding of. They
+// check for that (a plane other than the one just crossed, or a second exit
+// face, within the widening of t0) and then finish with exact restarts from
+// there (trace_restart_exact with t_from), which are watertight.
+bool near_t0(float ts, float t0) {
+    precise float d = abs(ts - t0);
+    return d <= T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38);
+}
+
+// True when a decision at node `n` needs the exact fallback: a ray inside the
+// split plane, or a plane within rounding of t0 that is not `crossed`.
+bool ambiguous_decision(uint visit, uvec2 n, float ts, float t0, uvec2 crossed) {
+    if (visit == VISIT_BOTH_SAME) return true;
+    if (visit == VISIT_NEAR) return false;
+    return near_t0(ts, t0) && any(notEqual(node_plane(n), crossed));
 }
 
 #endif

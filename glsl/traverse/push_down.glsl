@@ -8,7 +8,7 @@
 #define TRAVERSE_PUSH_DOWN_GLSL
 
 bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
-    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, true, best, c);
+    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, true, -3.40282347e38, 0u, best, c);
     uint node = 0u;
     float t1 = t1_scene;
     float t0_restart = t0;  // where the segment started at the last restart

@@ -15,14 +15,22 @@
 // their order and their segments are the stack's, and so are the answers. The
 // cost is that second descent below the entry's node. The push-down node is the
 // deepest node above which no entry is pending, kept with its stack segment.
-bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, inout Hit best,
-                         inout TraceCounters c) {
+// `pending` counts the entries a full stack would hold, so the search is skipped
+// when there are none, and after a hit inside the leaf unless the ray ever lay
+// in a split plane (only such entries can start before the hit).
+// `t_from`: leaves whose segment ends before it (less the widening) are known to
+// be done (the fallback of robust backtrack and ropes); -FLT_MAX for none.
+// `step`: the loop steps already taken.
+bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, float t_from, uint step,
+                         inout Hit best, inout TraceCounters c) {
+    precise float t_from_lo = t_from - T_EPS * abs(t_from);
     uint node = 0u;
     uint restart_node = 0u;
     float restart_t0 = t0;
     float restart_t1 = t1;
     bool push_down = use_push_down;
-    uint step = 0u;
+    uint pending = 0u;
+    bool in_plane = false;
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;
@@ -30,8 +38,15 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, ino
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
-            node = visit == VISIT_FAR ? far : near;
-            if (visit == VISIT_BOTH) t1 = ts;
+            if (visit == VISIT_BOTH && ts < t_from_lo) {
+                node = far;  // the near side ends before t_from: done already
+                t0 = ts;
+            } else {
+                node = visit == VISIT_FAR ? far : near;
+                if (visit == VISIT_BOTH) t1 = ts;
+                if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) pending += 1u;
+                if (visit == VISIT_BOTH_SAME) in_plane = true;
+            }
             if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) push_down = false;
             if (push_down) {
                 restart_node = node;
@@ -45,13 +60,13 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, ino
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE && ANY_HIT) return true;
+        if (pending == 0u || (leaf == LEAF_DONE && !in_plane)) return true;
         uint next;
-        bool shallowest;
         uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
-                                     next, t0, t1, shallowest, c, step);
+                                     next, t0, t1, pending, c, step);
         if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
         node = next;
-        push_down = use_push_down && shallowest;
+        push_down = use_push_down && pending == 0u;
         if (push_down) {
             restart_node = node;
             restart_t0 = t0;
@@ -63,7 +78,7 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, ino
 }
 
 bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
-    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, false, best, c);
+    if (ROBUST) return trace_restart_exact(r, t0, t1_scene, false, -3.40282347e38, 0u, best, c);
     uint node = 0u;
     float t1 = t1_scene;
     float t0_restart = t0;  // where the segment started at the last restart

@@ -3,15 +3,21 @@
 // in `node_boxes`). After a leaf without a hit inside it, the ray leaves through
 // the face where its box ends, follows that rope and descends the subtree to the
 // leaf that holds the segment just behind. No stack, no restart from the root.
+// With ROBUST on, a leaf left within rounding of an edge or corner of its box, a
+// descent that meets a plane within rounding of t0 (other than the face just
+// crossed), or a ray inside a split plane finishes with exact restarts from
+// there (see near_t0 in common.glsl).
 // CPU twin: `trace_ropes` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_ROPES_GLSL
 #define TRAVERSE_ROPES_GLSL
 
 bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+    float t_scene0 = t0;
     uint node = 0u;
     float t1 = t1_scene;
     // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
     uvec2 exit_plane = EXACT_PLANE;
+    uvec2 crossed = NO_PLANE;  // ROBUST: the face the last leaf was left through
     uint step = 0u;
     // While-while form, as in stack.glsl: descend to a leaf, then visit it.
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -21,6 +27,9 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
+            if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
+                return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
+            }
             if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_BOTH) {
@@ -35,13 +44,19 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         }
         // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
         uint face;
-        float exit_t = box_exit(r, node, face);
+        float t_next;
+        float exit_t = box_exit(r, node, face, t_next);
         float leaf_t1 = min(min(exit_t, t1_scene), t1);
         uint leaf = visit_leaf(r, n, leaf_t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || leaf_t1 >= t1_scene) return true;
+        if (ROBUST && (leaf_t1 != exit_t || near_t0(t_next, exit_t) || near_t0(exit_t, t0))) {
+            // Left near an edge or corner of the leaf (or a sliver of it).
+            return trace_restart_exact(r, t_scene0, t1_scene, false, max(t0, leaf_t1), step, best, c);
+        }
         uint next = ropes[node * 6u + face];
         if (next == NO_ROPE) return true;
+        crossed = box_face_plane(node, face);
         // Never step backwards: keep t0 when rounding puts the exit behind it.
         t0 = max(t0, leaf_t1);
         t1 = min(t1_scene, best.t);

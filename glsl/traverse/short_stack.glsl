@@ -25,6 +25,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     float restart_t0 = t0;  // the restart node's stack segment (exact restarts)
     float restart_t1 = t1_scene;
     bool push_down = use_push_down;
+    uint dropped = 0u;      // exact restarts: entries pending below the short stack
+    bool in_plane = false;  // a ray in a split plane pushed an entry (see restart.glsl)
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -42,6 +44,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 // Push the far child; a full stack loses its oldest entry.
                 if (count == STACK_SIZE) {
                     c.drops += 1u;
+                    dropped += 1u;
                 } else {
                     count += 1u;
                 }
@@ -50,6 +53,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 stack_t1[head] = t1;
                 stack_plane[head] = t1_plane;
                 head = (head + 1u) % STACK_SIZE;
+                if (visit == VISIT_BOTH_SAME) in_plane = true;
                 if (visit == VISIT_BOTH) {
                     t1 = ts;
                     t1_plane = node_plane(n);
@@ -76,7 +80,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
             }
-            if (count == 0u && !ROBUST) return true;
+            if (count == 0u && (!ROBUST || dropped == 0u || !in_plane)) return true;
         }
         if (count > 0u) {
             head = (head + STACK_SIZE - 1u) % STACK_SIZE;
@@ -88,13 +92,13 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             continue;
         }
         if (ROBUST) {
+            if (dropped == 0u) return true;
             uint next;
-            bool shallowest;
             uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
-                                         next, t0, t1, shallowest, c, step);
+                                         next, t0, t1, dropped, c, step);
             if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
             node = next;
-            push_down = use_push_down && shallowest;
+            push_down = use_push_down && dropped == 0u;
             if (push_down) {
                 restart_node = node;
                 restart_t0 = t0;

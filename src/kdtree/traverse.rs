@@ -539,7 +539,13 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
 /// traversal is over), or the step limit.
 enum Successor {
     None,
-    Found { node: u32, t0: f32, t1: f32, shallowest: bool },
+    /// `above`: the entries still pending above the one found.
+    Found {
+        node: u32,
+        t0: f32,
+        t1: f32,
+        above: u32,
+    },
     Cut,
 }
 
@@ -561,7 +567,7 @@ fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, done:
             let far_t0 = if visit == Visit::Both { ts } else { t0 };
             if child == near {
                 if !done || starts_before(far_t0, s.best.t) {
-                    found = Successor::Found { node: far, t0: far_t0, t1, shallowest: pending == 0 };
+                    found = Successor::Found { node: far, t0: far_t0, t1, above: pending };
                 }
                 pending += 1;
                 if visit == Visit::Both {
@@ -578,17 +584,31 @@ fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, done:
 
 /// Twin of `trace_restart_exact` in glsl/traverse/restart.glsl: `restart` and
 /// `push-down` with exact restarts (robust mode), visiting what `trace_stack` visits.
-fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: bool) -> bool {
+/// `t_from`: leaves whose segment ends before it (less the widening) are done
+/// already (the fallback of robust backtrack and ropes); `-f32::MAX` for none.
+fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: bool, t_from: f32) -> bool {
+    let t_from_lo = t_from - T_EPS * t_from.abs();
     let mut node = 0u32;
     let (mut restart_node, mut restart_t0, mut restart_t1) = (0u32, t0, t1);
     let mut push_down = use_push_down;
+    // Entries a full stack would hold, and whether the ray ever lay in a split plane.
+    let (mut pending, mut in_plane) = (0u32, false);
     while s.c.steps < MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
-            node = if visit == Visit::Far { far } else { near };
-            if visit == Visit::Both {
-                t1 = ts;
+            if visit == Visit::Both && ts < t_from_lo {
+                node = far; // the near side ends before t_from: done already
+                t0 = ts;
+            } else {
+                node = if visit == Visit::Far { far } else { near };
+                if visit == Visit::Both {
+                    t1 = ts;
+                }
+                if matches!(visit, Visit::Both | Visit::BothSame) {
+                    pending += 1;
+                }
+                in_plane |= visit == Visit::BothSame;
             }
             if matches!(visit, Visit::Both | Visit::BothSame) {
                 push_down = false;
@@ -602,12 +622,16 @@ fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: b
         if done && s.r.any_hit {
             return true;
         }
+        if pending == 0 || (done && !in_plane) {
+            return true;
+        }
         match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
             Successor::None => return true,
             Successor::Cut => return false,
-            Successor::Found { node: next, t0: n0, t1: n1, shallowest } => {
+            Successor::Found { node: next, t0: n0, t1: n1, above } => {
                 (node, t0, t1) = (next, n0, n1);
-                push_down = use_push_down && shallowest;
+                pending = above;
+                push_down = use_push_down && above == 0;
                 if push_down {
                     (restart_node, restart_t0, restart_t1) = (node, t0, t1);
                 }
@@ -621,7 +645,7 @@ fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: b
 /// Twin of `trace_restart` in glsl/traverse/restart.glsl.
 fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
     if s.r.wr.robust {
-        return trace_restart_exact(s, t0, t1_scene, false);
+        return trace_restart_exact(s, t0, t1_scene, false, -f32::MAX);
     }
     let mut node = 0u32;
     let mut t1 = t1_scene;
@@ -660,7 +684,7 @@ fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
 /// Twin of `trace_push_down` in glsl/traverse/push_down.glsl.
 fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
     if s.r.wr.robust {
-        return trace_restart_exact(s, t0, t1_scene, true);
+        return trace_restart_exact(s, t0, t1_scene, true, -f32::MAX);
     }
     let mut node = 0u32;
     let mut t1 = t1_scene;
@@ -722,13 +746,18 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
     // The restart node's stack segment (exact restarts).
     let (mut restart_t0, mut restart_t1) = (t0, t1_scene);
     let mut push_down = use_push_down;
+    // Exact restarts: entries pending below the short stack, and whether the ray
+    // ever lay in a split plane (see trace_restart_exact).
+    let (mut dropped, mut in_plane) = (0u32, false);
     while s.c.steps < MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
+            in_plane |= visit == Visit::BothSame;
             let mut push = |entry: (u32, f32, f32, ExitPlane), c: &mut Counters| {
                 if count == size {
                     c.drops += 1;
+                    dropped += 1;
                 } else {
                     count += 1;
                 }
@@ -766,7 +795,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 head = (head + size - 1) % size;
                 count -= 1;
             }
-            if count == 0 && !s.r.wr.robust {
+            if count == 0 && (!s.r.wr.robust || dropped == 0 || !in_plane) {
                 return true;
             }
         }
@@ -777,12 +806,16 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
             continue;
         }
         if s.r.wr.robust {
+            if dropped == 0 {
+                return true;
+            }
             match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
                 Successor::None => return true,
                 Successor::Cut => return false,
-                Successor::Found { node: next, t0: n0, t1: n1, shallowest } => {
+                Successor::Found { node: next, t0: n0, t1: n1, above } => {
                     (node, t0, t1) = (next, n0, n1);
-                    push_down = use_push_down && shallowest;
+                    dropped = above;
+                    push_down = use_push_down && above == 0;
                     if push_down {
                         (restart_node, restart_t0, restart_t1) = (node, t0, t1);
                     }
@@ -806,10 +839,13 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
     false
 }
 
-/// Exit distance of the ray from a node box: the nearest far plane. Axes with a
-/// zero direction component never end the segment. Twin of `box_exit` in common.glsl.
-fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize) {
+/// Exit distance of the ray from a node box: the nearest far plane, its face
+/// (2·axis + 1 for the max face) and the next far plane (+inf when none). Axes
+/// with a zero direction component never end the segment. Twin of `box_exit` in
+/// common.glsl.
+fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize, f32) {
     let mut t_exit = f32::INFINITY;
+    let mut t_next = f32::INFINITY;
     let mut face = 0usize;
     for axis in 0..3 {
         if r.dir[axis] == 0.0 {
@@ -819,27 +855,61 @@ fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize) {
         let plane = if positive { b[3 + axis] } else { b[axis] };
         let t = (plane - r.origin[axis]) * r.inv_dir[axis];
         if t < t_exit {
+            t_next = t_exit;
             t_exit = t;
             face = 2 * axis + positive as usize;
+        } else if t < t_next {
+            t_next = t;
         }
     }
-    (t_exit, face)
+    (t_exit, face, t_next)
+}
+
+/// The plane of face `face` of a box, as [`node_plane`] names split planes
+/// (twin of `box_face_plane` in common.glsl).
+fn box_face_plane(b: &[f32; 6], face: usize) -> ExitPlane {
+    let axis = face / 2;
+    ExitPlane::Plane(axis, b[axis + if face % 2 == 1 { 3 } else { 0 }].to_bits())
+}
+
+/// Twin of `near_t0` in common.glsl: `ts` within the widening of `t0`.
+fn near_t0(ts: f32, t0: f32) -> bool {
+    (ts - t0).abs() <= T_EPS * glsl_min(glsl_max(ts.abs(), t0.abs()), f32::MAX)
+}
+
+/// Twin of `ambiguous_decision` in common.glsl: a ray inside the split plane, or
+/// a plane within rounding of t0 that is not `crossed`.
+fn ambiguous_decision(visit: &Visit, n: KdNode, ts: f32, t0: f32, crossed: ExitPlane) -> bool {
+    match visit {
+        Visit::BothSame => true,
+        Visit::Near => false,
+        _ => near_t0(ts, t0) && node_plane(n) != crossed,
+    }
 }
 
 /// Twin of `trace_backtrack` in glsl/traverse/backtrack.glsl.
 fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
+    let t_scene0 = t0;
+    let robust = s.r.wr.robust;
     let mut node = 0u32;
     let mut t1 = t1_scene;
     // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
     let mut exit_plane = ExitPlane::Exact;
+    let mut t1_plane = ExitPlane::None; // robust: the plane the segment ends at, when known
+    let mut crossed = ExitPlane::None; // robust: the plane the last leaf was left through
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
+            if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
+                return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
+            }
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
                     node = near;
+                    // A split clamped into the segment names no plane the segment ends at.
+                    t1_plane = if ts == t0 || ts == t1 { ExitPlane::None } else { node_plane(n) };
                     t1 = ts;
                 }
                 Visit::Near | Visit::BothSame => node = near,
@@ -851,18 +921,32 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         }
         // Climb to the first ancestor the ray leaves after t1.
         t0 = t1;
+        crossed = t1_plane;
         let mut exit = t0;
+        let mut face = 0;
         let mut depth = 0;
+        let mut ambiguous = false;
         while exit <= t0 && node != 0 && depth < MAX_STACK {
             node = links.parents[node as usize];
             s.c.nodes += 1;
-            exit = box_exit(s.r, &links.boxes[node as usize]).0;
+            let b = &links.boxes[node as usize];
+            (exit, face, _) = box_exit(s.r, b);
+            if robust && near_t0(exit, t0) && box_face_plane(b, face) != crossed {
+                ambiguous = true;
+            }
             depth += 1;
+        }
+        if exit <= t0 && node != 0 && depth < MAX_STACK {
+            return false; // climb cut short
+        }
+        if ambiguous {
+            return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
         }
         if exit <= t0 {
             return true; // the root's box ends here: nothing left
         }
         t1 = glsl_min(glsl_min(exit, t1_scene), s.best.t);
+        t1_plane = if t1 == exit { box_face_plane(&links.boxes[node as usize], face) } else { ExitPlane::None };
         exit_plane = ExitPlane::Any;
         s.c.restarts += 1;
     }
@@ -871,14 +955,20 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
 
 /// Twin of `trace_ropes` in glsl/traverse/ropes.glsl.
 fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> bool {
+    let t_scene0 = t0;
+    let robust = s.r.wr.robust;
     let mut node = 0u32;
     let mut t1 = t1_scene;
     // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
     let mut exit_plane = ExitPlane::Exact;
+    let mut crossed = ExitPlane::None; // robust: the face the last leaf was left through
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
+            if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
+                return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
+            }
             match visit {
                 Visit::Far => node = far,
                 Visit::Both => {
@@ -890,15 +980,21 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
             continue;
         }
         // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
-        let (exit, face) = box_exit(s.r, &links.boxes[node as usize]);
+        let b = &links.boxes[node as usize];
+        let (exit, face, t_next) = box_exit(s.r, b);
         let leaf_t1 = glsl_min(glsl_min(exit, t1_scene), t1);
         if s.leaf(n, leaf_t1) || leaf_t1 >= t1_scene {
             return true;
+        }
+        if robust && (leaf_t1 != exit || near_t0(t_next, exit) || near_t0(exit, t0)) {
+            // Left near an edge or corner of the leaf (or a sliver of it).
+            return trace_restart_exact(s, t_scene0, t1_scene, false, glsl_max(t0, leaf_t1));
         }
         let next = links.ropes[node as usize][face];
         if next == NO_ROPE {
             return true;
         }
+        crossed = box_face_plane(b, face);
         // Never step backwards: keep t0 when rounding puts the exit behind it.
         t0 = glsl_max(t0, leaf_t1);
         t1 = glsl_min(t1_scene, s.best.t);
