@@ -2,9 +2,10 @@
 // without a hit inside it, climb the parent links (side buffer) to the first
 // ancestor whose box (side buffer) the ray leaves after the leaf's exit, and
 // descend from there with [leaf exit, ancestor exit].
-// With ROBUST on, a climb or descent that meets a plane within rounding of the
-// leaf exit (other than the plane just crossed), or a ray inside a split plane,
-// finishes with exact restarts from there (see near_t0 in common.glsl).
+// With ROBUST on, a leaf left near an edge or corner of its box, a climb or
+// descent that meets a plane within rounding of the leaf exit (other than the
+// plane just crossed), or a ray inside a split plane finishes with exact
+// restarts from there (see near_t0 in common.glsl).
 // CPU twin: `trace_backtrack` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_BACKTRACK_GLSL
 #define TRAVERSE_BACKTRACK_GLSL
@@ -46,6 +47,13 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
+        if (ROBUST) {
+            // Left near an edge or corner of the leaf's box: a second face within rounding.
+            uint leaf_face;
+            float t_next;
+            float leaf_exit = box_exit(r, node, leaf_face, t_next);
+            if (near_t0(t_next, leaf_exit)) return trace_restart_exact(r, t_scene0, t1_scene, false, t1, step, best, c);
+        }
         // Climb to the first ancestor the ray leaves after t1.
         t0 = t1;
         crossed = t1_plane;

@@ -919,6 +919,13 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
+        if robust {
+            // Left near an edge or corner of the leaf's box: a second face within rounding.
+            let (leaf_exit, _, t_next) = box_exit(s.r, &links.boxes[node as usize]);
+            if near_t0(t_next, leaf_exit) {
+                return trace_restart_exact(s, t_scene0, t1_scene, false, t1);
+            }
+        }
         // Climb to the first ancestor the ray leaves after t1.
         t0 = t1;
         crossed = t1_plane;
