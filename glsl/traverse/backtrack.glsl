@@ -18,6 +18,9 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
     uvec2 exit_plane = EXACT_PLANE;
     uvec2 t1_plane = NO_PLANE;  // ROBUST: the plane the segment ends at, when known
     uvec2 crossed = NO_PLANE;   // ROBUST: the plane the last leaf was left through
+    // ROBUST: finish with exact restarts from t0. One call site after the loop, so
+    // the kernel holds one copy of that code.
+    bool fallback = false;
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -28,7 +31,8 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
-                return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
+                fallback = true;
+                break;
             }
             if (visit == VISIT_FAR) {
                 node = far;
@@ -44,6 +48,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             n = fetch_node(node, c);
             ++step;
         }
+        if (fallback) break;
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
@@ -52,7 +57,11 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             uint leaf_face;
             float t_next;
             float leaf_exit = box_exit(r, node, leaf_face, t_next);
-            if (near_t0(t_next, leaf_exit)) return trace_restart_exact(r, t_scene0, t1_scene, false, t1, step, best, c);
+            if (near_t0(t_next, leaf_exit)) {
+                t0 = t1;
+                fallback = true;
+                break;
+            }
         }
         // Climb to the first ancestor the ray leaves after t1.
         t0 = t1;
@@ -69,13 +78,17 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             if (ROBUST && near_t0(exit_t, t0) && any(notEqual(box_face_plane(node, face), crossed))) ambiguous = true;
         }
         if (exit_t <= t0 && node != 0u && depth < MAX_STACK) return false;  // climb cut short
-        if (ambiguous) return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
+        if (ambiguous) {
+            fallback = true;
+            break;
+        }
         if (exit_t <= t0) return true;  // the root's box ends here: nothing left
         t1 = min(min(exit_t, t1_scene), best.t);
         t1_plane = t1 == exit_t ? box_face_plane(node, face) : NO_PLANE;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
+    if (fallback) return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);
     return false;
 }
 

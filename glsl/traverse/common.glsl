@@ -308,7 +308,7 @@ uvec2 box_face_plane(uint node, uint face) {
 // cells around a vertex or edge that the ray passes within rounding of. They
 // check for that (a plane other than the one just crossed, or a second exit
 // face, within the widening of t0) and then finish with exact restarts from
-// there (trace_restart_exact with t_from), which are watertight.
+// there (trace_restart_exact with t_from, and push-down), which are watertight.
 bool near_t0(float ts, float t0) {
     precise float d = abs(ts - t0);
     return d <= T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38);

@@ -44,10 +44,12 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
             } else {
                 node = visit == VISIT_FAR ? far : near;
                 if (visit == VISIT_BOTH) t1 = ts;
-                if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) pending += 1u;
+                if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) {
+                    pending += 1u;
+                    push_down = false;
+                }
                 if (visit == VISIT_BOTH_SAME) in_plane = true;
             }
-            if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) push_down = false;
             if (push_down) {
                 restart_node = node;
                 restart_t0 = t0;

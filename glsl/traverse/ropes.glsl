@@ -18,6 +18,9 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
     // No near child behind t0 on the first descent; after a hop, ties at t0 go far.
     uvec2 exit_plane = EXACT_PLANE;
     uvec2 crossed = NO_PLANE;  // ROBUST: the face the last leaf was left through
+    // ROBUST: finish with exact restarts from t0. One call site after the loop, so
+    // the kernel holds one copy of that code.
+    bool fallback = false;
     uint step = 0u;
     // While-while form, as in stack.glsl: descend to a leaf, then visit it.
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -28,7 +31,8 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
-                return trace_restart_exact(r, t_scene0, t1_scene, false, t0, step, best, c);
+                fallback = true;
+                break;
             }
             if (visit == VISIT_FAR) {
                 node = far;
@@ -42,6 +46,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
             n = fetch_node(node, c);
             ++step;
         }
+        if (fallback) break;
         // The leaf's own exit, from its box: ropes leave the ancestors' planes behind.
         uint face;
         float t_next;
@@ -52,7 +57,9 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         if (leaf == LEAF_DONE || leaf_t1 >= t1_scene) return true;
         if (ROBUST && (leaf_t1 != exit_t || near_t0(t_next, exit_t) || near_t0(exit_t, t0))) {
             // Left near an edge or corner of the leaf (or a sliver of it).
-            return trace_restart_exact(r, t_scene0, t1_scene, false, max(t0, leaf_t1), step, best, c);
+            t0 = max(t0, leaf_t1);
+            fallback = true;
+            break;
         }
         uint next = ropes[node * 6u + face];
         if (next == NO_ROPE) return true;
@@ -64,6 +71,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
+    if (fallback) return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);
     return false;
 }
 

@@ -140,7 +140,11 @@ impl Traversal {
     /// `robust` on. Their restarts do not start again at a t value (which cannot
     /// order cells that meet at a vertex or edge the ray passes within a float of)
     /// but descend again to the leaf just left to find the entry a full stack would
-    /// pop next. `backtrack`, `ropes` and packets restart at a t value.
+    /// pop next. `backtrack` and `ropes` (robust) keep their own walk and switch to
+    /// exact restarts where a t value could not order the cells (a plane or a
+    /// second exit face within rounding of t0, a ray inside a split plane), so
+    /// they are watertight but may name another member of a tie. Packets restart
+    /// at a t value.
     pub fn follows_stack(&self) -> bool {
         self.robust && !self.uses_packets() && !self.variant.uses_links()
     }
@@ -607,11 +611,9 @@ fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: b
                 }
                 if matches!(visit, Visit::Both | Visit::BothSame) {
                     pending += 1;
+                    push_down = false;
                 }
                 in_plane |= visit == Visit::BothSame;
-            }
-            if matches!(visit, Visit::Both | Visit::BothSame) {
-                push_down = false;
             }
             if push_down {
                 (restart_node, restart_t0, restart_t1) = (node, t0, t1);
@@ -902,7 +904,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
-                return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
+                return trace_restart_exact(s, t_scene0, t1_scene, true, t0);
             }
             match visit {
                 Visit::Far => node = far,
@@ -923,7 +925,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
             // Left near an edge or corner of the leaf's box: a second face within rounding.
             let (leaf_exit, _, t_next) = box_exit(s.r, &links.boxes[node as usize]);
             if near_t0(t_next, leaf_exit) {
-                return trace_restart_exact(s, t_scene0, t1_scene, false, t1);
+                return trace_restart_exact(s, t_scene0, t1_scene, true, t1);
             }
         }
         // Climb to the first ancestor the ray leaves after t1.
@@ -947,7 +949,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
             return false; // climb cut short
         }
         if ambiguous {
-            return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
+            return trace_restart_exact(s, t_scene0, t1_scene, true, t0);
         }
         if exit <= t0 {
             return true; // the root's box ends here: nothing left
@@ -974,7 +976,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
             if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
-                return trace_restart_exact(s, t_scene0, t1_scene, false, t0);
+                return trace_restart_exact(s, t_scene0, t1_scene, true, t0);
             }
             match visit {
                 Visit::Far => node = far,
@@ -995,7 +997,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         }
         if robust && (leaf_t1 != exit || near_t0(t_next, exit) || near_t0(exit, t0)) {
             // Left near an edge or corner of the leaf (or a sliver of it).
-            return trace_restart_exact(s, t_scene0, t1_scene, false, glsl_max(t0, leaf_t1));
+            return trace_restart_exact(s, t_scene0, t1_scene, true, glsl_max(t0, leaf_t1));
         }
         let next = links.ropes[node as usize][face];
         if next == NO_ROPE {
