@@ -41,7 +41,17 @@ type Batch = (Category, Vec<Ray>, Vec<Exact>, Vec<Hit>);
 fn traversals() -> Vec<Traversal> {
     let mut all: Vec<Traversal> = Variant::ALL.iter().map(|&v| Traversal::closest(v)).collect();
     all.push(Traversal { stack_size: 1, ..Traversal::closest(Variant::PushDownShortStack) });
+    // Packets as subgroup lanes (the GPU only: the CPU twins trace single rays).
+    all.push(Traversal { packet_width: 4, ..Traversal::closest(Variant::Restart) });
+    all.push(Traversal { packet_width: 8, ..Traversal::closest(Variant::PushDownShortStack) });
+    all.push(Traversal { packet_width: 8, ..Traversal::closest(Variant::Stack) });
     all
+}
+
+/// The variant, its short-stack size and its packet width.
+fn describe(t: &Traversal) -> String {
+    let packet = if t.packet_width > 1 { format!(" W={}", t.packet_width) } else { String::new() };
+    format!("{}({}){packet}", t.variant.name(), t.stack_size)
 }
 
 fn cpu_hits(tree: &KdTree, triangles: &[[Vec3; 3]], links: &TreeLinks, rays: &[Ray], traversal: Traversal) -> Vec<Hit> {
@@ -90,7 +100,7 @@ fn stress_scene(name: &str, scale: f32) {
             if !gpu && traversal != Traversal::closest(Variant::Stack) && traversal.variant != Variant::Ropes {
                 continue; // the CPU twins equal the GPU bit for bit (tests/gpu_trace.rs)
             }
-            let label = format!("{name} ×{scale} {} {}", traversal.variant.name(), if gpu { "GPU" } else { "CPU" });
+            let label = format!("{name} ×{scale} {} {}", describe(&traversal), if gpu { "GPU" } else { "CPU" });
             println!("\n{label}\n{}", table_header());
             let mut all = Tally::default();
             for (category, rays, exacts, stack) in &batches {
@@ -150,7 +160,7 @@ fn stress_scene(name: &str, scale: f32) {
             if t.serious() > 0 {
                 failures.push(format!(
                     "{name} ×{scale} {} any-hit / {}: {} serious: {:?}",
-                    traversal.variant.name(),
+                    describe(&traversal),
                     category.name(),
                     t.serious(),
                     t.serious_examples
@@ -161,7 +171,7 @@ fn stress_scene(name: &str, scale: f32) {
                 *n += m;
             }
         }
-        println!("{}", table_row(&format!("{} any-hit, all categories", traversal.variant.name()), &shadow));
+        println!("{}", table_row(&format!("{} any-hit, all categories", describe(&traversal)), &shadow));
     }
     assert_validation_clean(&ctx);
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
@@ -227,13 +237,13 @@ fn closed_meshes_have_no_holes() {
             let hits = match tracer.trace(&rays, &TraceOptions { traversal, counters: false }) {
                 Ok(result) => result.hits,
                 Err(e) => {
-                    println!("{name}, {}: {e}", traversal.variant.name());
-                    failures.push(format!("{name}, {}: {e}", traversal.variant.name()));
+                    println!("{name}, {}: {e}", describe(&traversal));
+                    failures.push(format!("{name}, {}: {e}", describe(&traversal)));
                     continue;
                 }
             };
             let escapes: Vec<usize> = (0..rays.len()).filter(|&i| !hits[i].is_hit()).collect();
-            let label = format!("{}({})", traversal.variant.name(), traversal.stack_size);
+            let label = describe(&traversal);
             println!("{name}, {label}: {} of {} rays escaped", escapes.len(), rays.len());
             // Every variant must be watertight: the stack and the variants that
             // follow it by construction, backtrack and ropes because they finish

@@ -36,6 +36,7 @@ struct LaneSplit {
     bool above;          // needs the above child
     bool below_first;    // below is its near child
     bool splits;         // needs both children
+    bool same;           // lies in the split plane: both children with the same interval
     float below_t0, below_t1, above_t0, above_t1;
 };
 
@@ -45,6 +46,7 @@ LaneSplit lane_split(bool lane_on, TraceRay r, uint node, uvec2 n, float t0, flo
     s.above = false;
     s.below_first = true;
     s.splits = false;
+    s.same = false;
     s.below_t0 = t0; s.below_t1 = t1; s.above_t0 = t0; s.above_t1 = t1;
     if (!lane_on) return s;
     uint near, far;
@@ -54,6 +56,7 @@ LaneSplit lane_split(bool lane_on, TraceRay r, uint node, uvec2 n, float t0, flo
     bool need_near = visit != VISIT_FAR;
     bool need_far = visit != VISIT_NEAR;
     s.splits = need_near && need_far;
+    s.same = visit == VISIT_BOTH_SAME;
     float near_t1 = visit == VISIT_BOTH ? ts : t1;
     float far_t0 = visit == VISIT_BOTH ? ts : t0;
     if (s.below_first) {

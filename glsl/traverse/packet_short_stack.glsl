@@ -4,7 +4,14 @@
 // to back: it takes part in an entry only if the entry starts exactly where its
 // last leaf ended; any part it could not take (the packet went the other way, an
 // entry was dropped) is picked up by the next restart, which starts each lane at
-// the exit of its last leaf.
+// the exit of its last leaf. That is the paper's scheme, run when ROBUST is off.
+// With ROBUST on there is no restart at a t value (which cannot order the cells
+// around an edge or vertex the ray passes within rounding of): where the packet
+// would restart, each unfinished lane finishes alone with exact restarts
+// (trace_restart_exact) over the part of its segment behind its last leaf and
+// behind the earliest entry it had to leave (t_gap), or over all of it when the
+// lane lay in a split plane (whose other side it may have skipped). A lane that
+// finishes earlier does the same when it left an entry starting before its hit.
 #ifndef TRAVERSE_PACKET_SHORT_STACK_GLSL
 #define TRAVERSE_PACKET_SHORT_STACK_GLSL
 
@@ -26,13 +33,20 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
     uvec2 exit_plane = NO_PLANE;
     bool lane_on = alive;
     bool complete = true;
+    bool in_plane = false;  // ROBUST: this lane lay in a split plane
+    bool fallback = false;  // ROBUST: this lane finishes alone with exact restarts from t_from
+    float t_from = t_start;
+    float t_gap = uintBitsToFloat(0x7f800000u);  // ROBUST: earliest start of an entry this lane left
+    bool ended = false;
     if (!packet_any(lane_on, mask)) return true;
-    for (uint step = 0u; step < MAX_TRAVERSAL_STEPS; ++step) {
+    uint step = 0u;
+    for (; step < MAX_TRAVERSAL_STEPS; ++step) {
         c.steps += 1u;
         uvec2 n = load_node(node);
         if (lane_on) c.nodes += 1u;
         if (!node_is_leaf(n)) {
             LaneSplit s = lane_split(lane_on, r, node, n, t0, t1, exit_plane);
+            if (s.same) in_plane = true;
             // A lane's first child is its near one when it needs it, else the only one.
             bool wants_below = s.below && (s.below_first || !s.above);
             bool wants_above = s.above && !wants_below;
@@ -48,10 +62,18 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
             bool needs_second = go_below ? s.above : s.below;
             float second_t0 = go_below ? s.above_t0 : s.below_t0;
             float second_t1 = go_below ? s.above_t1 : s.below_t1;
+            // ROBUST: a lane that needs the first child but waits for its near one
+            // (the second) has lost the first.
+            bool needs_first = go_below ? s.below : s.above;
+            if (needs_first && !goes_on) t_gap = min(t_gap, go_below ? s.below_t0 : s.above_t0);
             if (packet_any(needs_second, mask)) {
                 push_down = false;
+                // ROBUST: without a stack (kd-restart) the second child is lost to its lanes.
+                if (size == 0u && needs_second) t_gap = min(t_gap, second_t0);
                 if (size > 0u) {
                     if (count == size) {
+                        // ROBUST: the overwritten entry is lost to its lanes.
+                        if (alive && stack_t0[head] <= stack_t1[head]) t_gap = min(t_gap, stack_t0[head]);
                         // The oldest entry is overwritten: its lanes will restart.
                         if (alive) c.drops += 1u;
                     } else {
@@ -76,7 +98,20 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
             if (!intersect_leaf(r, n, best, c)) complete = false;
             bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best.t <= t1;
             t_done = t1;
-            if (done || t1 >= t1_scene) alive = false;
+            if (done || t1 >= t1_scene) {
+                alive = false;
+                if (ROBUST) {
+                    // Entries still on the stack for this lane are lost to it too.
+                    for (uint k = 0u; k < count; ++k) {
+                        uint slot = (head + size - 1u - k) % size;
+                        if (stack_t0[slot] <= stack_t1[slot]) t_gap = min(t_gap, stack_t0[slot]);
+                    }
+                    if (!(ANY_HIT && done) && (in_plane || t_gap < best.t)) {
+                        fallback = true;
+                        t_from = in_plane ? -3.40282347e38 : t_gap;
+                    }
+                }
+            }
         }
         // Pop until an entry that continues some lane's segment.
         lane_on = false;
@@ -87,10 +122,23 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
             t0 = stack_t0[head];
             t1 = stack_t1[head];
             lane_on = alive && t0 <= t1 && t0 == t_done;
+            if (alive && t0 <= t1 && t0 != t_done) t_gap = min(t_gap, t0);
             if (packet_any(lane_on, mask)) break;
         }
         if (packet_any(lane_on, mask)) continue;
-        if (!packet_any(alive, mask)) return complete;
+        if (!packet_any(alive, mask)) {
+            ended = true;
+            break;
+        }
+        if (ROBUST) {
+            if (alive) {
+                fallback = true;
+                t_from = in_plane ? -3.40282347e38 : min(t_done, t_gap);
+                alive = false;
+            }
+            ended = true;
+            break;
+        }
         // Restart every unfinished lane behind its last leaf.
         count = 0u;
         node = restart_node;
@@ -105,7 +153,10 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
             c.restarts += 1u;
         }
     }
-    return false;
+    if (ROBUST && fallback) {
+        return trace_restart_exact(r, t_start, t1_scene, true, t_from, step, best, c) && complete;
+    }
+    return ended && complete;
 }
 
 #endif
