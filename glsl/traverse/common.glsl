@@ -150,11 +150,13 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
 // split that needed both children. `done`: the leaf held the closest hit, and
 // only entries that start before it count (the stack's drop rule). Returns
 // SUCCESSOR_NONE when there is none (traversal is over); `above` counts the
-// entries still pending above the one found.
+// entries still pending above the one found. `known`: how many entries are
+// pending on that path; the descent stops at the last of them (the deepest), so
+// it costs no more than a kd-restart's descent to the same entry.
 #define SUCCESSOR_NONE 0u
 #define SUCCESSOR_FOUND 1u
 #define SUCCESSOR_CUT 2u
-uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool done, float best_t,
+uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, uint known, bool done, float best_t,
                      out uint next, out float next_t0, out float next_t1, out uint above,
                      inout TraceCounters c, inout uint step) {
     uint node = start;
@@ -166,7 +168,7 @@ uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, bool
     next_t0 = 0.0;
     next_t1 = 0.0;
     above = 0u;
-    while (node != leaf) {
+    while (node != leaf && pending < known) {
         if (step >= MAX_TRAVERSAL_STEPS) return SUCCESSOR_CUT;
         uvec2 n = fetch_node(node, c);
         ++step;

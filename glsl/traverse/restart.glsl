@@ -64,7 +64,7 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
         if (leaf == LEAF_DONE && ANY_HIT) return true;
         if (pending == 0u || (leaf == LEAF_DONE && !in_plane)) return true;
         uint next;
-        uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
+        uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, pending, leaf == LEAF_DONE, best.t,
                                      next, t0, t1, pending, c, step);
         if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
         node = next;

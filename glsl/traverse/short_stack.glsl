@@ -94,7 +94,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         if (ROBUST) {
             if (dropped == 0u) return true;
             uint next;
-            uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, leaf == LEAF_DONE, best.t,
+            uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, dropped, leaf == LEAF_DONE, best.t,
                                          next, t0, t1, dropped, c, step);
             if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
             node = next;

@@ -555,12 +555,13 @@ enum Successor {
 
 /// Twin of `stack_successor` in common.glsl: the entry a full stack would pop
 /// after `leaf`, found by descending again from `start` (segment `[s0, s1]`)
-/// along the path to the leaf with the stack's decisions.
-fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, done: bool) -> Successor {
+/// along the path to the leaf with the stack's decisions, stopping at the last of
+/// the `known` entries pending on that path.
+fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, known: u32, done: bool) -> Successor {
     let (mut node, mut t0, mut t1) = (start, s0, s1);
     let mut pending = 0u32;
     let mut found = Successor::None;
-    while node != leaf {
+    while node != leaf && pending < known {
         if s.c.steps >= MAX_TRAVERSAL_STEPS {
             return Successor::Cut;
         }
@@ -627,7 +628,7 @@ fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: b
         if pending == 0 || (done && !in_plane) {
             return true;
         }
-        match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
+        match stack_successor(s, restart_node, restart_t0, restart_t1, node, pending, done) {
             Successor::None => return true,
             Successor::Cut => return false,
             Successor::Found { node: next, t0: n0, t1: n1, above } => {
@@ -811,7 +812,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
             if dropped == 0 {
                 return true;
             }
-            match stack_successor(s, restart_node, restart_t0, restart_t1, node, done) {
+            match stack_successor(s, restart_node, restart_t0, restart_t1, node, dropped, done) {
                 Successor::None => return true,
                 Successor::Cut => return false,
                 Successor::Found { node: next, t0: n0, t1: n1, above } => {
