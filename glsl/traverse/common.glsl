@@ -143,58 +143,68 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
 // Exact restarts (ROBUST; `restart`, `push-down` and a short stack run empty):
 // instead of starting again at a t value - at a vertex or edge of cells several
 // leaves end within one float of each other, and a t cannot order them - find the
-// entry a full stack would pop after `leaf`. Descend again from `start` (an
-// ancestor of the leaf with no pending entry above it, whose stack segment is
-// [s0, s1]) along the path to the leaf, with the stack's own decisions: the entry
-// is the far child of the deepest node where the path took the near side of a
-// split that needed both children. `done`: the leaf held the closest hit, and
-// only entries that start before it count (the stack's drop rule). Returns
-// SUCCESSOR_NONE when there is none (traversal is over); `above` counts the
-// entries still pending above the one found. `known`: how many entries are
-// pending on that path; the descent stops at the last of them (the deepest), so
-// it costs no more than a kd-restart's descent to the same entry.
-#define SUCCESSOR_NONE 0u
-#define SUCCESSOR_FOUND 1u
-#define SUCCESSOR_CUT 2u
-uint stack_successor(TraceRay r, uint start, float s0, float s1, uint leaf, uint known, bool done, float best_t,
-                     out uint next, out float next_t0, out float next_t1, out uint above,
-                     inout TraceCounters c, inout uint step) {
-    uint node = start;
-    float t0 = s0;
-    float t1 = s1;
-    uint pending = 0u;
-    bool found = false;
-    next = 0u;
-    next_t0 = 0.0;
-    next_t1 = 0.0;
-    above = 0u;
-    while (node != leaf && pending < known) {
-        if (step >= MAX_TRAVERSAL_STEPS) return SUCCESSOR_CUT;
-        uvec2 n = fetch_node(node, c);
-        ++step;
-        uint near, far;
-        float ts;
-        uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
-        uint child = leaf >= node_above_child(n) ? node_above_child(n) : node + 1u;
-        if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) {
-            float far_t0 = visit == VISIT_BOTH ? ts : t0;
-            if (child == near) {
-                if (!done || far_t0 < best_t) {
-                    found = true;
-                    next = far;
-                    next_t0 = far_t0;
-                    next_t1 = t1;
-                    above = pending;
-                }
-                pending += 1u;
-                if (visit == VISIT_BOTH) t1 = ts;
-            } else {
-                t0 = far_t0;
+// entry a full stack would pop after the leaf just left. The traversal seeks it in
+// its own descent loop (one loop, so SIMD lanes that seek and lanes that descend
+// share it): from the restart node (an ancestor of the leaf with no pending entry
+// above it, whose stack segment it knows) along the path to the leaf, with the
+// stack's own decisions; the entry is the far child of the deepest node where the
+// path took the near side of a split that needed both children. `done`: the leaf
+// held the closest hit, and only entries that start before it count (the stack's
+// drop rule). `known`: how many entries are pending on that path; the seek ends at
+// the last of them (the deepest), so it descends no deeper than a kd-restart to
+// the same entry. CPU twin: `stack_successor` in src/kdtree/traverse.rs.
+struct Seek {
+    bool seeking;
+    uint target;  // the leaf just left
+    bool done;
+    uint known;
+    uint seen;    // pending entries met so far
+    bool found;
+    uint next;    // the entry: node, stack segment, entries pending above it
+    float next_t0;
+    float next_t1;
+    uint above;
+};
+
+Seek seek_start(uint target, bool done, uint known) {
+    Seek k;
+    k.seeking = true;
+    k.target = target;
+    k.done = done;
+    k.known = known;
+    k.seen = 0u;
+    k.found = false;
+    k.next = 0u;
+    k.next_t0 = 0.0;
+    k.next_t1 = 0.0;
+    k.above = 0u;
+    return k;
+}
+
+// One node of the seek: notes the entry a decision leaves (if any), keeps the
+// stack's segment in t0, t1, and returns the child on the path. Ends the seek
+// (k.seeking = false) at the last known entry or at the leaf.
+uint seek_step(inout Seek k, uint node, uvec2 n, uint visit, uint near, uint far, float ts, inout float t0,
+               inout float t1, float best_t) {
+    uint child = k.target >= node_above_child(n) ? node_above_child(n) : node + 1u;
+    if (visit == VISIT_BOTH || visit == VISIT_BOTH_SAME) {
+        float far_t0 = visit == VISIT_BOTH ? ts : t0;
+        if (child == near) {
+            if (!k.done || far_t0 < best_t) {
+                k.found = true;
+                k.next = far;
+                k.next_t0 = far_t0;
+                k.next_t1 = t1;
+                k.above = k.seen;
             }
+            k.seen += 1u;
+            if (visit == VISIT_BOTH) t1 = ts;
+        } else {
+            t0 = far_t0;
         }
-        node = child;
     }
-    return found ? SUCCESSOR_FOUND : SUCCESSOR_NONE;
+    if (k.seen == k.known || child == k.target) k.seeking = false;
+    return child;
 }
 
 // Loads the triangle of the leaf reference `index` (stored in prim_indices

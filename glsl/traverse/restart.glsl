@@ -10,10 +10,10 @@
 #define TRAVERSE_RESTART_GLSL
 
 // Exact restarts for `restart` and (use_push_down) `push-down`: every restart
-// finds the entry a full stack would pop next (stack_successor in common.glsl) by
-// descending again from the restart node to the leaf just left, so the leaves,
-// their order and their segments are the stack's, and so are the answers. The
-// cost is that second descent below the entry's node. The push-down node is the
+// seeks the entry a full stack would pop next (Seek in common.glsl) by
+// descending again from the restart node toward the leaf just left, so the
+// leaves, their order and their segments are the stack's, and so are the
+// answers. The push-down node is the
 // deepest node above which no entry is pending, kept with its stack segment.
 // `pending` counts the entries a full stack would hold, so the search is skipped
 // when there are none, and after a hit inside the leaf unless the ray ever lay
@@ -31,6 +31,8 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
     bool push_down = use_push_down;
     uint pending = 0u;
     bool in_plane = false;
+    Seek k = seek_start(0u, false, 0u);
+    k.seeking = false;
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;
@@ -38,7 +40,18 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
-            if (visit == VISIT_BOTH && ts < t_from_lo) {
+            if (k.seeking) {
+                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best.t);
+                if (!k.seeking) {
+                    if (!k.found) return true;  // nothing left
+                    node = k.next;
+                    t0 = k.next_t0;
+                    t1 = k.next_t1;
+                    pending = k.above;
+                    push_down = use_push_down && pending == 0u;
+                    c.restarts += 1u;
+                }
+            } else if (visit == VISIT_BOTH && ts < t_from_lo) {
                 node = far;  // the near side ends before t_from: done already
                 t0 = ts;
             } else {
@@ -63,18 +76,10 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE && ANY_HIT) return true;
         if (pending == 0u || (leaf == LEAF_DONE && !in_plane)) return true;
-        uint next;
-        uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, pending, leaf == LEAF_DONE, best.t,
-                                     next, t0, t1, pending, c, step);
-        if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
-        node = next;
-        push_down = use_push_down && pending == 0u;
-        if (push_down) {
-            restart_node = node;
-            restart_t0 = t0;
-            restart_t1 = t1;
-        }
-        c.restarts += 1u;
+        k = seek_start(node, leaf == LEAF_DONE, pending);
+        node = restart_node;
+        t0 = restart_t0;
+        t1 = restart_t1;
     }
     return false;
 }

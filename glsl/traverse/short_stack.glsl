@@ -2,7 +2,7 @@
 // STACK_SIZE entries; a push onto a full stack overwrites (drops) the oldest
 // entry; when the stack runs empty before the segment ends, restart behind the
 // last leaf — at the root, or at the push-down node when `use_push_down`.
-// With ROBUST on, that restart is exact (stack_successor in common.glsl): the
+// With ROBUST on, that restart is exact (Seek in common.glsl): the
 // leaves and answers are the full stack's.
 // CPU twin: `trace_short_stack` in src/kdtree/traverse.rs.
 #ifndef TRAVERSE_SHORT_STACK_GLSL
@@ -27,6 +27,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     bool push_down = use_push_down;
     uint dropped = 0u;      // exact restarts: entries pending below the short stack
     bool in_plane = false;  // a ray in a split plane pushed an entry (see restart.glsl)
+    Seek k = seek_start(0u, false, 0u);  // exact restarts seek in this loop (common.glsl)
+    k.seeking = false;
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -36,7 +38,18 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
-            if (visit == VISIT_FAR) {
+            if (ROBUST && k.seeking) {
+                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best.t);
+                if (!k.seeking) {
+                    if (!k.found) return true;  // nothing left
+                    node = k.next;
+                    t0 = k.next_t0;
+                    t1 = k.next_t1;
+                    dropped = k.above;
+                    push_down = use_push_down && dropped == 0u;
+                    c.restarts += 1u;
+                }
+            } else if (visit == VISIT_FAR) {
                 node = far;
             } else if (visit == VISIT_NEAR) {
                 node = near;
@@ -93,18 +106,10 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         }
         if (ROBUST) {
             if (dropped == 0u) return true;
-            uint next;
-            uint found = stack_successor(r, restart_node, restart_t0, restart_t1, node, dropped, leaf == LEAF_DONE, best.t,
-                                         next, t0, t1, dropped, c, step);
-            if (found != SUCCESSOR_FOUND) return found == SUCCESSOR_NONE;
-            node = next;
-            push_down = use_push_down && dropped == 0u;
-            if (push_down) {
-                restart_node = node;
-                restart_t0 = t0;
-                restart_t1 = t1;
-            }
-            c.restarts += 1u;
+            k = seek_start(node, leaf == LEAF_DONE, dropped);
+            node = restart_node;
+            t0 = restart_t0;
+            t1 = restart_t1;
             continue;
         }
         if (t1 >= t1_scene) return true;

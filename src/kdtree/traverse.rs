@@ -553,10 +553,12 @@ enum Successor {
     Cut,
 }
 
-/// Twin of `stack_successor` in common.glsl: the entry a full stack would pop
-/// after `leaf`, found by descending again from `start` (segment `[s0, s1]`)
-/// along the path to the leaf with the stack's decisions, stopping at the last of
-/// the `known` entries pending on that path.
+/// Twin of the seek of common.glsl (`Seek`, `seek_step`), which the shaders run
+/// inside their descent loop and this twin as a loop of its own (the same nodes in
+/// the same order): the entry a full stack would pop after `leaf`, found by
+/// descending again from `start` (segment `[s0, s1]`) along the path to the leaf
+/// with the stack's decisions, stopping at the last of the `known` entries
+/// pending on that path.
 fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, known: u32, done: bool) -> Successor {
     let (mut node, mut t0, mut t1) = (start, s0, s1);
     let mut pending = 0u32;
