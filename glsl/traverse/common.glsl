@@ -166,9 +166,10 @@ struct Seek {
     uint above;
 };
 
+// A seek for the entry after leaf `target`; none (not seeking) when known is 0.
 Seek seek_start(uint target, bool done, uint known) {
     Seek k;
-    k.seeking = true;
+    k.seeking = known > 0u;
     k.target = target;
     k.done = done;
     k.known = known;

@@ -19,7 +19,7 @@
 // when there are none, and after a hit inside the leaf unless the ray ever lay
 // in a split plane (only such entries can start before the hit).
 // `t_from`: leaves whose segment ends before it (less the widening) are known to
-// be done (the fallback of robust backtrack and ropes); -FLT_MAX for none.
+// be done (the fallback of robust backtrack, ropes and packets); -FLT_MAX for none.
 // `step`: the loop steps already taken.
 bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, float t_from, uint step,
                          inout Hit best, inout TraceCounters c) {
@@ -32,7 +32,6 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
     uint pending = 0u;
     bool in_plane = false;
     Seek k = seek_start(0u, false, 0u);
-    k.seeking = false;
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;

@@ -28,7 +28,6 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     uint dropped = 0u;      // exact restarts: entries pending below the short stack
     bool in_plane = false;  // a ray in a split plane pushed an entry (see restart.glsl)
     Seek k = seek_start(0u, false, 0u);  // exact restarts seek in this loop (common.glsl)
-    k.seeking = false;
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
