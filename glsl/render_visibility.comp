@@ -43,10 +43,12 @@ void main() {
         Surface s = surfaces[prim];
         Ray ray = rays[i];
         WatertightRay wr = watertight_ray(ray.origin, ray.dir);
-        float t, u, v;
-        uint result = intersect_triangle_f32(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v);
-        bool found = result == TRI_HIT
-            || (result == TRI_UNSURE && intersect_triangle_f64(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v));
+        wr.ray_tmax = ray.tmax;
+        float t, u, v, e;
+        double t64;
+        uint result = intersect_triangle_f32(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v, e);
+        bool found = (result == TRI_HIT && t <= ray.tmax)
+            || (result == TRI_UNSURE && intersect_triangle_f64(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, t, u, v, t64));
         if (!found) {
             // An edge tie: the plane hit, barycentrics clamped into the triangle.
             vec3 e1 = s.v1.xyz - s.v0.xyz;

@@ -67,6 +67,41 @@ bool ray_is_valid(Ray ray) {
     return origin_ok && dir_ok && !isnan(ray.tmin) && !isnan(ray.tmax);
 }
 
+// Runs the variant on one ray (every lane enters for packets: their decisions
+// are ballots). False when the driver cut a loop short.
+bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
+    bool finished = true;
+    bool packet_variant = VARIANT == VARIANT_STACK || VARIANT == VARIANT_RESTART || VARIANT == VARIANT_PUSH_DOWN ||
+                          VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
+    if (PACKET_WIDTH > 1u && packet_variant) {
+        // Every lane of a packet enters, finished or not: decisions are ballots.
+        if (VARIANT == VARIANT_STACK) {
+            finished = trace_packet_stack(alive, r, t0, t1, best, c);
+        } else {
+            uint size = (VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) ? STACK_SIZE : 0u;
+            bool use_push_down = VARIANT == VARIANT_PUSH_DOWN || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
+            finished = trace_packet_short_stack(alive, r, t0, t1, size, use_push_down, best, c);
+        }
+    } else if (alive) {
+        if (VARIANT == VARIANT_RESTART) {
+            finished = trace_restart(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN) {
+            finished = trace_push_down(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, false, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, true, best, c);
+        } else if (VARIANT == VARIANT_BACKTRACK) {
+            finished = trace_backtrack(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_ROPES) {
+            finished = trace_ropes(r, t0, t1, best, c);
+        } else {
+            finished = trace_stack(r, t0, t1, best, c);
+        }
+    }
+    return finished;
+}
+
 void main() {
     uint index = gl_GlobalInvocationID.x;
     if (index >= params.ray_count) return;
@@ -104,34 +139,23 @@ void main() {
     float t0 = 0.0, t1 = 0.0;
     bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
     if (!valid) best.prim_id = PRIM_INVALID;
-    bool packet_variant = VARIANT == VARIANT_STACK || VARIANT == VARIANT_RESTART || VARIANT == VARIANT_PUSH_DOWN ||
-                          VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
-    bool finished = true;
-    if (PACKET_WIDTH > 1u && packet_variant) {
-        // Every lane of a packet enters, finished or not: decisions are ballots.
-        if (VARIANT == VARIANT_STACK) {
-            finished = trace_packet_stack(alive, r, t0, t1, best, c);
-        } else {
-            uint size = (VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) ? STACK_SIZE : 0u;
-            bool use_push_down = VARIANT == VARIANT_PUSH_DOWN || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
-            finished = trace_packet_short_stack(alive, r, t0, t1, size, use_push_down, best, c);
-        }
-    } else if (alive) {
-        if (VARIANT == VARIANT_RESTART) {
-            finished = trace_restart(r, t0, t1, best, c);
-        } else if (VARIANT == VARIANT_PUSH_DOWN) {
-            finished = trace_push_down(r, t0, t1, best, c);
-        } else if (VARIANT == VARIANT_SHORT_STACK) {
-            finished = trace_short_stack(r, t0, t1, false, best, c);
-        } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
-            finished = trace_short_stack(r, t0, t1, true, best, c);
-        } else if (VARIANT == VARIANT_BACKTRACK) {
-            finished = trace_backtrack(r, t0, t1, best, c);
-        } else if (VARIANT == VARIANT_ROPES) {
-            finished = trace_ropes(r, t0, t1, best, c);
-        } else {
-            finished = trace_stack(r, t0, t1, best, c);
-        }
+    // Robust single rays trace fast first, then carefully when the fast trace met a
+    // pair it could not decide in f32 (see careful_pass in common.glsl). Packets
+    // trace once, carefully: their kernels are large (two copies would double the
+    // compile time) and slower than single rays on lavapipe anyway.
+    bool two_pass = ROBUST && PACKET_WIDTH == 1u;
+    careful_pass = !two_pass;
+    bool finished = run_traversal(alive, r, t0, t1, best, c);
+    if (two_pass && alive && needs_careful) {
+        careful_pass = true;
+        best.t = ray.tmax;
+        best.prim_id = PRIM_MISS;
+        best.u = 0.0;
+        best.v = 0.0;
+        best_ref = NO_REF;
+        best_err = 0.0;
+        c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
+        finished = run_traversal(true, r, t0, t1, best, c);
     }
     if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
     if (best.prim_id >= PRIM_INCOMPLETE) {

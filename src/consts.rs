@@ -9,9 +9,11 @@ pub const MAX_TREE_DEPTH: u32 = 48;
 pub const MAX_STACK: u32 = MAX_TREE_DEPTH + 1;
 /// Traversal steps after which a ray gives up and is reported as capped.
 pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
-/// The watertight test's error bound on an f32 edge function is
-/// `2^-EDGE_GAMMA_LOG2` times the magnitude of its terms (twice the worst case of
-/// about 12 roundings of 2^-24); within it the test is redone in f64.
+/// The watertight test bounds each sheared vertex coordinate's error by
+/// `2^-EDGE_GAMMA_LOG2` times its magnitude before the shear cancelled (32
+/// roundings of 2^-24, about 6 times the worst case of 5) and carries that
+/// through the edge functions' products (`edge_error` in triangle.glsl); an edge
+/// function within its bound is redone in f64.
 pub const EDGE_GAMMA_LOG2: u32 = 19;
 /// The traversals' split decisions and early exits are widened by
 /// `2^-TRAVERSAL_EPS_LOG2` relative (about 8 f32 ulps, more than the rounding of

@@ -293,6 +293,17 @@ pub fn hits_exact(triangles: &[[Vec3; 3]], ray: &Ray, prim: u32) -> bool {
     }
 }
 
+/// The exact `t` (rounded to f64) at which `ray` hits triangle `prim` inside
+/// `[tmin, tmax]`, or `None` when it misses it.
+pub fn hit_t_exact(triangles: &[[Vec3; 3]], ray: &Ray, prim: u32) -> Option<f64> {
+    let r = ExactRay::new(ray)?;
+    let tri = triangles.get(prim as usize)?;
+    if is_skipped(tri) {
+        return None;
+    }
+    r.hit_exact(tri).map(|f| frac_to_f64(&f))
+}
+
 /// Distance from `p` to the closed triangle `tri` (f64).
 pub fn point_triangle_distance(p: DVec3, tri: &[Vec3; 3]) -> f64 {
     let [a, b, c] = tri.map(|v| v.as_dvec3());

@@ -216,8 +216,8 @@ fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
 pub enum TriTest {
     /// No hit in `[tmin, tmax]`.
     Miss,
-    /// A hit: `(t, u, v)`.
-    Hit(f32, f32, f32),
+    /// A hit: `(t, u, v, e)`, `e` a bound on the error of `t` (0 unless robust).
+    Hit(f32, f32, f32, f32),
     /// Rounding could decide it: ask [`WatertightRay::intersect_f64`].
     Unsure,
 }
@@ -268,9 +268,11 @@ impl WatertightRay {
     #[inline]
     pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         match self.intersect_f32(v0, v1, v2, tmin, tmax) {
-            TriTest::Hit(t, u, v) => Some((t, u, v)),
+            TriTest::Hit(t, u, v, _) => (t <= tmax).then_some((t, u, v)),
             TriTest::Miss => None,
-            TriTest::Unsure => self.intersect_f64(v0, v1, v2, tmin, tmax),
+            TriTest::Unsure => {
+                self.intersect_f64(v0, v1, v2, tmin).filter(|h| h.0 <= tmax).map(|(t, u, v, _)| (t, u, v))
+            }
         }
     }
 
@@ -279,6 +281,12 @@ impl WatertightRay {
     /// distance to the ray's bounds within its error bound; then
     /// [`WatertightRay::intersect_f64`] decides. Whether a pair is unsure does
     /// not depend on `tmax` (the closest hit so far).
+    ///
+    /// When robust, a hit carries `e`, a bound on `|t - exact t|` (the edge
+    /// functions' errors carried through `t = Σ u_i z_i / Σ u_i`, plus the
+    /// rounding of `t`), and a hit whose interval `[t - e, t]` reaches `tmax`
+    /// counts (`t <= ray_tmax` still holds), so that callers can order two hits
+    /// whose `t` lie within rounding of each other in f64.
     #[inline]
     pub fn intersect_f32(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> TriTest {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
@@ -294,6 +302,7 @@ impl WatertightRay {
         let cy = c[ky] - self.sy * c[kz];
         // Scaled barycentric coordinates (edge functions).
         let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+        let (mut eu, mut ev, mut ew) = (0.0f32, 0.0f32, 0.0f32);
         if !self.robust {
             // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
             if u == 0.0 || v == 0.0 || w == 0.0 {
@@ -313,9 +322,14 @@ impl WatertightRay {
             let bey = b[ky].abs() + (self.sy * b[kz]).abs();
             let cex = c[kx].abs() + (self.sx * c[kz]).abs();
             let cey = c[ky].abs() + (self.sy * c[kz]).abs();
-            let eu = EDGE_GAMMA * (cex * bey + cey * bex);
-            let ev = EDGE_GAMMA * (aex * cey + aey * cex);
-            let ew = EDGE_GAMMA * (bex * aey + bey * aex);
+            // Each sheared coordinate lies within EDGE_GAMMA·m of its exact value, m the
+            // largest magnitude before the shear cancelled; with l the largest
+            // |coordinate|, an edge function is off by less than EDGE_GAMMA·m·(4.2·l +
+            // 2·EDGE_GAMMA·m) (see triangle.glsl).
+            let m = aex.max(aey).max(bex.max(bey)).max(cex.max(cey));
+            let l = ax.abs().max(ay.abs()).max(bx.abs().max(by.abs())).max(cx.abs().max(cy.abs()));
+            let bound = EDGE_GAMMA * m * (5.0 * l + 2.0 * EDGE_GAMMA * m);
+            (eu, ev, ew) = (bound, bound, bound);
             // Certainly outside (one edge function surely negative, another surely positive)?
             let negative = u < -eu || v < -ev || w < -ew;
             let positive = u > eu || v > ev || w > ew;
@@ -338,20 +352,32 @@ impl WatertightRay {
         // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
         // ending on a vertex): decide in f64 which side of the bound it lies on.
         let t_err = EDGE_GAMMA * ((u * az).abs() + (v * bz).abs() + (w * cz).abs());
+        // The edge functions' errors δu_i move t_scaled − b·det by Σ δu_i (z_i − b).
         let at_tmin = t_scaled - tmin * det;
         let at_tmax = t_scaled - self.ray_tmax * det;
-        let near_tmin = !tmin.is_infinite() && at_tmin.abs() <= t_err + EDGE_GAMMA * (tmin * det).abs();
-        let near_tmax =
-            !self.ray_tmax.is_infinite() && at_tmax.abs() <= t_err + EDGE_GAMMA * (self.ray_tmax * det).abs();
+        let weights_err = eu + ev + ew;
+        let dev = |b: f32| (az - b).abs().max((bz - b).abs()).max((cz - b).abs());
+        let near_tmin =
+            !tmin.is_infinite() && at_tmin.abs() <= t_err + weights_err * dev(tmin) + EDGE_GAMMA * (tmin * det).abs();
+        let near_tmax = !self.ray_tmax.is_infinite()
+            && at_tmax.abs() <= t_err + weights_err * dev(self.ray_tmax) + EDGE_GAMMA * (self.ray_tmax * det).abs();
         if self.robust && (near_tmin || near_tmax) {
             return TriTest::Unsure;
         }
         let rcp_det = 1.0 / det;
         let t = t_scaled * rcp_det;
-        if !(t >= tmin && t <= tmax) {
+        let mut e = 0.0;
+        if self.robust {
+            // t − exact t = (Σ δu_i (z_i − t) + rounding of t_scaled − t · rounding of
+            // det) / det, and |z_i − t| is at most the spread of the z_i.
+            let spread = az.max(bz).max(cz) - az.min(bz).min(cz);
+            e = (t_err + weights_err * spread + EDGE_GAMMA * t_scaled.abs()) / det.abs() + EDGE_GAMMA * t.abs();
+        }
+        let below = t <= tmax || (self.robust && t - e <= tmax && t <= self.ray_tmax);
+        if !(t >= tmin && below) {
             return TriTest::Miss;
         }
-        TriTest::Hit(t, v * rcp_det, w * rcp_det)
+        TriTest::Hit(t, v * rcp_det, w * rcp_det, e)
     }
 
     /// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the
@@ -361,7 +387,11 @@ impl WatertightRay {
     /// functions with exact signs ([`diff_of_products`]): the triangles around an
     /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
     /// of them, never none.
-    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    ///
+    /// The hit's `t` lies in `[tmin, ray_tmax]` (exactly, in f64); the answer is
+    /// `(t, u, v, t64)`, `t64` the f64 `t` by which callers order hits whose f32
+    /// `t` lie within rounding of each other.
+    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32) -> Option<(f32, f32, f32, f64)> {
         let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
         let a = v0.as_dvec3() - o;
         let b = v1.as_dvec3() - o;
@@ -399,11 +429,10 @@ impl WatertightRay {
             return None;
         }
         let t64 = num / den;
-        // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
-        let t = t64 as f32;
-        if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64 && t <= tmax) {
+        // Exact against the ray's bounds.
+        if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64) {
             return None;
         }
-        Some((t, (v / det) as f32, (w / det) as f32))
+        Some((t64 as f32, (v / det) as f32, (w / det) as f32, t64))
     }
 }

@@ -1158,6 +1158,16 @@ fn verify(args: VerifyArgs) -> Result<()> {
     println!("\n{total} rays, {serious} serious errors");
     for (label, (ray, hit, verdict)) in examples {
         println!("- {label}: {} ray {ray:?} -> {hit:?}", verdict.name());
+        // What the exact reference says, and where the tracer's triangle lies exactly.
+        let exact = match kdtrace::exact::closest_exact(&scene.triangles, &ray) {
+            kdtrace::exact::Exact::Hit { ties, t } => format!("triangles {ties:?} at t = {t:e}"),
+            other => format!("{other:?}"),
+        };
+        let own = match kdtrace::exact::hit_t_exact(&scene.triangles, &ray, hit.prim_id) {
+            Some(t) => format!("hit exactly at t = {t:e}"),
+            None => "missed exactly".to_string(),
+        };
+        println!("    exact: {exact}; the tracer's triangle is {own}");
     }
     Ok(())
 }

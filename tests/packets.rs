@@ -1,5 +1,5 @@
 //! Packets as subgroups: every packet traversal, at every packet width the device's
-//! subgroup allows, returns the same hit as single-ray traversal for every ray
+//! subgroup allows, returns the same hit as single-ray traversal (the CPU twin) for every ray
 //! (the same t bit for bit; another primitive only in an exact tie). Run at the
 //! device's subgroup size, and on lavapipe again at 4 lanes in a child process
 //! with `LP_NATIVE_VECTOR_WIDTH=128`.
@@ -8,7 +8,7 @@ mod common;
 
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use kdtrace::geom::WatertightRay;
-use kdtrace::kdtree::traverse::{Traversal, Variant};
+use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::camera_rays_morton;
 use kdtrace::scene::{Camera, Scene};
@@ -24,11 +24,15 @@ const PACKET_VARIANTS: [(Variant, u32); 6] = [
     (Variant::PushDownShortStack, 3),
 ];
 
-fn check_scene(tracer: &mut Tracer, scene: &Scene, rays: &[Ray], widths: &[u32], name: &str) {
+fn check_scene(tracer: &mut Tracer, tree: &KdTree, scene: &Scene, rays: &[Ray], widths: &[u32], name: &str) {
+    // The single-ray answers from the CPU twins, which equal the GPU's single-ray
+    // kernels bit for bit (tests/gpu_trace.rs, tests/stress.rs) and cost no
+    // pipeline compiles.
+    let scene_ref = SceneRef::new(tree, &scene.triangles);
     for (variant, stack_size) in PACKET_VARIANTS {
         for any_hit in [false, true] {
             let single = Traversal { stack_size, any_hit, ..Traversal::closest(variant) };
-            let reference = tracer.trace(rays, &TraceOptions { traversal: single, counters: false }).unwrap().hits;
+            let reference: Vec<Hit> = rays.iter().map(|r| trace_ray(&scene_ref, r, single).0).collect();
             for &packet_width in widths {
                 let traversal = Traversal { packet_width, ..single };
                 let result = tracer.trace(rays, &TraceOptions { traversal, counters: true }).unwrap();
@@ -107,7 +111,7 @@ fn packets_match_single_rays_at_device_subgroup_size() {
         let camera = Camera::from_cameras_json(&scene_path("cameras.json"), name).unwrap().unwrap();
         let (mut rays, _) = camera_rays_morton(&camera, 48, 40);
         rays.extend(random_rays(&mut Rng(11), scene.bounds.min, scene.bounds.max, 1500));
-        check_scene(&mut tracer, &scene, &rays, &widths, name);
+        check_scene(&mut tracer, &tree, &scene, &rays, &widths, name);
     }
     assert_validation_clean(&ctx);
 }

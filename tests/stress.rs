@@ -28,12 +28,12 @@ use kdtrace::{Hit, Ray};
 
 /// Rays per category and scene.
 const RAYS: usize = 600;
-/// Lowest agreement in any category, for every variant. The goal is 99 %; rays
-/// from 1e5 scene sizes away measure 98.5–99.4 % (their disagreements are all
-/// neighbours across a shared edge, within rounding), so the floor sits below.
-const CATEGORY_FLOOR: f64 = 0.98;
+/// Lowest agreement in any category, for every variant: the goal, 99 %. The
+/// lowest measured is 99.67 % (split-plane origins on the teapot ×1e-4: hits
+/// 1e-15 apart in t, closer than f64 orders them).
+const CATEGORY_FLOOR: f64 = 0.99;
 /// Lowest agreement over all categories of one scene and traversal.
-const OVERALL_FLOOR: f64 = 0.97;
+const OVERALL_FLOOR: f64 = 0.99;
 
 /// One category's rays, their exact answers and the stack's hits.
 type Batch = (Category, Vec<Ray>, Vec<Exact>, Vec<Hit>);
@@ -191,6 +191,59 @@ fn stress_teapot() {
 fn stress_scaled_scenes() {
     stress_scene("teapot.obj", 1e-4);
     stress_scene("cornell_box.obj", 1e5);
+}
+
+/// The GPU kernels equal their CPU twins on hard rays too, hits and counters bit
+/// for bit: these rays need the f64 pass of a leaf (unsure pairs, depth ties) far
+/// more often than camera and random rays (tests/gpu_trace.rs), and robust single
+/// rays take it in a second, careful trace on the GPU but in one trace on the CPU.
+#[test]
+fn stress_rays_gpu_equals_cpu_twin() {
+    let mut failures = Vec::new();
+    for (name, scale) in [("teapot.obj", 1.0f32), ("teapot.obj", 1e5), ("cornell_box.obj", 1.0)] {
+        let mut scene = Scene::load(&scene_path(name)).unwrap();
+        for tri in scene.triangles.iter_mut() {
+            *tri = tri.map(|v| v * scale);
+        }
+        let triangles = &scene.triangles;
+        let tree = KdTree::build(triangles, &BuildConfig::default());
+        let links = TreeLinks::new(&tree.nodes, tree.bounds);
+        let ctx = context();
+        let mut tracer = Tracer::new(&ctx, &tree, triangles).unwrap();
+        let rays: Vec<Ray> = Category::ALL.iter().flat_map(|&c| stress_rays(c, triangles, &tree, 300, 3)).collect();
+        for variant in Variant::ALL {
+            for any_hit in [false, true] {
+                let traversal = Traversal { any_hit, ..Traversal::closest(variant) };
+                let gpu = tracer.trace(&rays, &TraceOptions { traversal, counters: true }).unwrap();
+                let counters = gpu.counters.unwrap();
+                let scene_ref = SceneRef::new(&tree, triangles).with_links(&links);
+                let mut differ = 0;
+                for (i, ray) in rays.iter().enumerate() {
+                    let (hit, c) = trace_ray(&scene_ref, ray, traversal);
+                    if !same_bits(&hit, &gpu.hits[i]) || c != counters[i] {
+                        if differ < 3 {
+                            failures.push(format!(
+                                "{name} ×{scale} {} any-hit {any_hit}: {ray:?}: GPU {:?} {:?}, CPU {hit:?} {c:?}",
+                                describe(&traversal),
+                                gpu.hits[i],
+                                counters[i]
+                            ));
+                        }
+                        differ += 1;
+                    }
+                }
+                if differ > 0 {
+                    failures.push(format!(
+                        "{name} ×{scale} {} any-hit {any_hit}: {differ} of {} rays differ",
+                        describe(&traversal),
+                        rays.len()
+                    ));
+                }
+            }
+        }
+        assert_validation_clean(&ctx);
+    }
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
 
 // ---- Watertightness --------------------------------------------------------

@@ -6,8 +6,9 @@
 // Near an edge the f32 edge function's sign is decided by rounding (translation,
 // shear and products each lose ~2^-24 of the coordinates' magnitude), so a ray
 // passing within a few ulps of an edge may hit the wrong one of two neighbours.
-// Each edge function gets an error bound, EDGE_GAMMA times the magnitudes of its
-// two vertices before cancellation (twice the worst case); when any edge function
+// Each edge function gets an error bound (the sheared coordinates' errors,
+// EDGE_GAMMA times their magnitudes before cancellation, carried through its two
+// products, with a margin of about 6); when any edge function
 // lies within its bound, the whole test is redone in f64 on the f32 inputs, whose
 // signs are those of the exact edge functions unless the ray passes within about
 // 2^-50 of the edge. Watertightness is kept: a shared edge's f32 sign outside its
@@ -81,8 +82,12 @@ double diff_of_products(double a, double b, double c, double d) {
 // the same for every triangle sharing it, and the 2D edge functions have exact
 // signs, so the triangles around an edge or vertex tile the plane exactly: a ray
 // through a vertex hits one of them, never none.
-bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
-                            out float t_out, out float u_out, out float v_out) {
+//
+// The hit's t lies in [tmin, r.ray_tmax] (exactly, in f64); `t64_out` is its f64
+// value, by which callers order hits whose f32 t lie within rounding of each
+// other (see intersect_leaf in traverse/common.glsl).
+bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin,
+                            out float t_out, out float u_out, out float v_out, out double t64_out) {
     dvec3 o = dvec3(r.origin);
     dvec3 d = dvec3(r.dir);
     precise dvec3 a = dvec3(v0) - o;
@@ -118,10 +123,10 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise double den = d.x * nx + d.y * ny + d.z * nz;
     if (den == 0.0) return false;
     precise double t64 = num / den;
-    // Exact against the ray's bounds; against the closest hit so far, in f32 like the f32 path.
-    float t = float(t64);
-    if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax) && t <= tmax)) return false;
-    t_out = t;
+    // Exact against the ray's bounds.
+    if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax))) return false;
+    t_out = float(t64);
+    t64_out = t64;
     precise double bu = v / det;
     precise double bv = w / det;
     u_out = float(bu);
@@ -139,11 +144,17 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
 // on tmax (the closest hit so far), so callers may defer the f64 tests.
 // `tmin` must be the ray's own; the decision near the ray's end uses `r.ray_tmax`.
 // Edges and vertices are hits; a ray in the triangle's plane misses.
+//
+// With ROBUST, `e_out` bounds |t - exact t| (the edge functions' errors carried
+// through t = sum(u_i z_i) / sum(u_i), plus t's own rounding), and a hit whose
+// interval [t - e, t] reaches tmax counts (t <= ray_tmax still holds): far from
+// the origin two surfaces a few ulps of t apart cannot be ordered in f32, and
+// the caller orders such pairs in f64. Without ROBUST, `e_out` is 0.
 #define TRI_MISS 0u
 #define TRI_HIT 1u
 #define TRI_UNSURE 2u
 uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
-                            out float t_out, out float u_out, out float v_out) {
+                            out float t_out, out float u_out, out float v_out, out float e_out) {
     precise vec3 a = v0 - r.origin;
     precise vec3 b = v1 - r.origin;
     precise vec3 c = v2 - r.origin;
@@ -158,6 +169,7 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise float u = cx * by - cy * bx;
     precise float v = ax * cy - ay * cx;
     precise float w = bx * ay - by * ax;
+    precise float eu = 0.0, ev = 0.0, ew = 0.0;  // the edge functions' error bounds (ROBUST)
     if (!ROBUST) {
         // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
         if (u == 0.0 || v == 0.0 || w == 0.0) {
@@ -177,9 +189,20 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         precise float bey = abs(b[r.ky]) + abs(r.sy * b[r.kz]);
         precise float cex = abs(c[r.kx]) + abs(r.sx * c[r.kz]);
         precise float cey = abs(c[r.ky]) + abs(r.sy * c[r.kz]);
-        precise float eu = EDGE_GAMMA * (cex * bey + cey * bex);
-        precise float ev = EDGE_GAMMA * (aex * cey + aey * cex);
-        precise float ew = EDGE_GAMMA * (bex * aey + bey * aex);
+        // Each sheared coordinate lies within EDGE_GAMMA * m of its exact value (about
+        // 5 roundings of 2^-24; EDGE_GAMMA is 32), m the largest magnitude before the
+        // shear cancelled. With l the largest |coordinate|, an edge function p q - r s
+        // is then off by at most ep|q| + |p|eq + ep eq + (the same for r s) plus two
+        // roundings of 2^-24 l^2: below EDGE_GAMMA m (4.2 l + 2 EDGE_GAMMA m). First
+        // order in the errors: a triangle near the ray but far from its origin (the
+        // usual case) gets a bound of its size times its distance, not its distance
+        // squared.
+        precise float m = max(max(max(aex, aey), max(bex, bey)), max(cex, cey));
+        precise float l = max(max(max(abs(ax), abs(ay)), max(abs(bx), abs(by))), max(abs(cx), abs(cy)));
+        precise float bound = EDGE_GAMMA * m * (5.0 * l + 2.0 * EDGE_GAMMA * m);
+        eu = bound;
+        ev = bound;
+        ew = bound;
         // Certainly outside (one edge function surely negative, another surely positive)?
         bool negative = u < -eu || v < -ev || w < -ew;
         bool positive = u > eu || v > ev || w > ew;
@@ -196,15 +219,30 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
     // ending on a vertex): decide in f64 which side of the bound it lies on.
     precise float t_err = EDGE_GAMMA * (abs(u * az) + abs(v * bz) + abs(w * cz));
+    // The edge functions' errors du_i move t_scaled - b det by sum du_i (z_i - b).
     precise float at_tmin = t_scaled - tmin * det;
     precise float at_tmax = t_scaled - r.ray_tmax * det;
-    bool near_tmin = !isinf(tmin) && abs(at_tmin) <= t_err + EDGE_GAMMA * abs(tmin * det);
-    bool near_tmax = !isinf(r.ray_tmax) && abs(at_tmax) <= t_err + EDGE_GAMMA * abs(r.ray_tmax * det);
+    precise float weights_err = eu + ev + ew;
+    precise float dev_tmin = max(max(abs(az - tmin), abs(bz - tmin)), abs(cz - tmin));
+    precise float dev_tmax = max(max(abs(az - r.ray_tmax), abs(bz - r.ray_tmax)), abs(cz - r.ray_tmax));
+    bool near_tmin = !isinf(tmin) && abs(at_tmin) <= t_err + weights_err * dev_tmin + EDGE_GAMMA * abs(tmin * det);
+    bool near_tmax = !isinf(r.ray_tmax)
+        && abs(at_tmax) <= t_err + weights_err * dev_tmax + EDGE_GAMMA * abs(r.ray_tmax * det);
     if (ROBUST && (near_tmin || near_tmax)) return TRI_UNSURE;
     precise float rcp_det = 1.0 / det;
     precise float t = t_scaled * rcp_det;
-    if (!(t >= tmin && t <= tmax)) return TRI_MISS;
+    precise float e = 0.0;
+    if (ROBUST) {
+        // t - exact t = (sum of du_i (z_i - t) + rounding of t_scaled - t * rounding of
+        // det) / det, and |z_i - t| is at most the spread of the z_i (t is their
+        // weighted mean).
+        precise float spread = max(max(az, bz), cz) - min(min(az, bz), cz);
+        e = (t_err + weights_err * spread + EDGE_GAMMA * abs(t_scaled)) / abs(det) + EDGE_GAMMA * abs(t);
+    }
+    bool below = t <= tmax || (ROBUST && t - e <= tmax && t <= r.ray_tmax);
+    if (!(t >= tmin && below)) return TRI_MISS;
     t_out = t;
+    e_out = e;
     precise float bu = v * rcp_det;
     precise float bv = w * rcp_det;
     u_out = bu;

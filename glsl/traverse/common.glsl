@@ -219,14 +219,49 @@ uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
     return a.w;
 }
 
+// Robust single rays are traced twice at most (trace.comp): a fast trace whose
+// leaves skip the f64 pass below and only note that a pair needed it, then, for
+// the rays so noted, a careful trace with it (packets trace carefully at once).
+// The pass is rarely needed (1 leaf in 4000 on random rays), but lavapipe runs a
+// loop's or branch's body under a mask even when no lane enters it, so in every
+// leaf it cost 44 % of robust `stack`'s shader instructions (bunny, random rays).
+// Both traces are inlined copies of one traversal, and careful_pass is a
+// constant in each after inlining, so the fast copy holds no f64 pass. The
+// careful trace decides everything the fast one decided the same way, so hits
+// and counters are those of a single careful trace (the CPU twins').
+bool careful_pass = true;
+bool needs_careful = false;
+
+// The closest hit's triangle reference (an index of tri_texels; NO_REF for none)
+// and a bound on |best.t - its exact t|, per invocation like `best` itself:
+// intersect_leaf orders hits within each other's bounds in f64.
+#define NO_REF 0xffffffffu
+uint best_ref = NO_REF;
+float best_err = 0.0;
+
+// The farthest t at which the closest hit's exact t may lie: cells and stack
+// entries beyond it cannot hold a closer hit (best.t without ROBUST, or no hit).
+float best_reach(Hit best) {
+    return ROBUST ? best.t + best_err : best.t;
+}
+
 // Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t);
 // any-hit mode stops at the first hit. Returns false when the driver cut a loop
 // short (see trace.comp).
 //
-// The f32 tests come first; the few pairs they leave unsure are decided in f64
-// afterwards, in a loop of their own: SIMD drivers such as lavapipe execute both
-// sides of a branch under a mask, but skip a loop no lane enters, so the f64
-// code costs nothing in a subgroup where no ray needs it.
+// The f32 tests come first. Two kinds of pairs they cannot decide go to a
+// second pass in f64, in a loop of its own (SIMD drivers such as lavapipe
+// execute both sides of a branch under a mask, but skip a loop no lane enters,
+// so the f64 code costs nothing in a subgroup where no ray needs it):
+// - unsure pairs (an edge function or a ray bound within rounding);
+// - with ROBUST, depth ties: a hit whose f32 t lies within rounding of the
+//   closest one's (far from the origin, surfaces a few ulps of t apart).
+// The second pass orders its contenders by f64 t (a later one wins an exact
+// tie, as in the f32 pass): the closest hit on entry (when its interval meets
+// the closest one's after the f32 pass), that closest one, and the leaf's
+// unsure pairs and, after a tie, its hits within the closest one's interval.
+// It tests each again (same bits), so only references stay live across the
+// f32 pass.
 bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) {
     uint count = node_prim_count(n);
     uint offset = node_prim_offset(n);
@@ -234,20 +269,28 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
     bool stopped = false;
     uint unsure = 0u;          // pairs left to f64
     uint first_unsure = count;
+    bool tie = false;          // a hit within rounding of the closest one
+    uint in_ref = best_ref;
     // Any-hit mode ends the loop by its condition, not by a `break`: on lavapipe a
     // divergent break here made robust any-hit traversal 1.6x slower than closest
     // hit for the same work (measured on Cornell box shadow rays).
     for (; i < count && !(ANY_HIT && stopped); ++i) {
         vec3 v0, v1, v2;
         uint prim = load_triangle(offset + i, v0, v1, v2);
-        float t, u, v;
-        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v);
+        float t, u, v, e;
+        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best_reach(best), t, u, v, e);
         if (result == TRI_HIT) {
-            best.t = t;
-            best.prim_id = prim;
-            best.u = u;
-            best.v = v;
-            if (ANY_HIT) stopped = true;
+            // [t - e, t + e] meets the closest hit's interval: order them in f64 (unless
+            // it is the same triangle, met again in another leaf: the same bits).
+            if (ROBUST && !ANY_HIT && best_ref != NO_REF && prim != best.prim_id && t + e >= best.t - best_err) {
+                tie = true;
+            }
+            if (t <= best.t) {
+                best = Hit(t, prim, u, v);
+                best_ref = offset + i;
+                best_err = e;
+                if (ANY_HIT) stopped = true;
+            }
         } else if (result == TRI_UNSURE) {
             first_unsure = min(first_unsure, i);
             unsure += 1u;
@@ -257,18 +300,51 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
     c.triangles += stopped ? i : count;
     bool complete = stopped || i == count;
     if (stopped) unsure = 0u;
-    uint j = first_unsure;
-    for (; unsure > 0u && j < count; ++j) {
+    // Without ROBUST the f32 test is never unsure (and the pass below is dead code).
+    // In the fast trace a leaf that needs the pass marks the ray to be traced
+    // again (see careful_pass).
+    if (!ROBUST || (unsure == 0u && !tie)) return complete;
+    if (!careful_pass) {
+        needs_careful = true;
+        return complete;
+    }
+
+    // The second pass: j = -2 is the closest hit on entry, j = -1 the closest
+    // after the f32 pass, j >= 0 the leaf's triangles.
+    float window = best_reach(best);  // contenders start at or before it
+    uint w_ref = best_ref;
+    bool w_contends = !ANY_HIT && w_ref != NO_REF;
+    int first = tie ? 0 : int(first_unsure);
+    int j = (tie && in_ref != NO_REF && in_ref != w_ref) ? -2 : (w_contends ? -1 : first);
+    double bar = double(uintBitsToFloat(0x7f800000u));  // f64 t of the closest contender
+    for (; j < int(count) && (j < 0 || tie || unsure > 0u);
+         j = j == -2 ? -1 : (j == -1 ? first : j + 1)) {
+        uint ref = j == -2 ? in_ref : (j == -1 ? w_ref : offset + uint(j));
         vec3 v0, v1, v2;
-        uint prim = load_triangle(offset + j, v0, v1, v2);
-        float t, u, v;
-        if (intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v) != TRI_UNSURE) continue;
-        unsure -= 1u;
-        if (intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, best.t, t, u, v)) {
-            best.t = t;
-            best.prim_id = prim;
-            best.u = u;
-            best.v = v;
+        uint prim = load_triangle(ref, v0, v1, v2);
+        float t, u, v, e;
+        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, window, t, u, v, e);
+        bool unsure_pair = result == TRI_UNSURE;
+        if (unsure_pair && j >= 0) unsure -= 1u;
+        if (!(unsure_pair || (result == TRI_HIT && (j < 0 || (tie && ref != w_ref))))) continue;
+        float t_f64, u_f64, v_f64;
+        double t64;
+        if (!intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, t_f64, u_f64, v_f64, t64)) {
+            if (unsure_pair) continue;
+            t64 = double(t);  // a certain f32 hit the f64 test rejects: keep its f32 t
+        }
+        // An unsure pair takes the f64 answer; a certain f32 hit keeps its f32 values.
+        if (unsure_pair) {
+            t = t_f64;
+            u = u_f64;
+            v = v_f64;
+            e = EDGE_GAMMA * abs(t_f64);
+        }
+        if (t64 <= bar) {
+            bar = t64;
+            best = Hit(t, prim, u, v);
+            best_ref = ref;
+            best_err = e;
             if (ANY_HIT) unsure = 0u;
         }
     }
@@ -282,7 +358,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
 uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounters c) {
     c.leaves += 1u;
     if (!intersect_leaf(r, n, best, c)) return LEAF_CUT;
-    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best.t <= t1;
+    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
     return done ? LEAF_DONE : LEAF_GO_ON;
 }
 

@@ -11,7 +11,8 @@
 bool lane_wants(bool alive, float t0, float t1, Hit best) {
     if (!alive || !(t0 <= t1)) return false;
     if (ANY_HIT) return best.prim_id == PRIM_MISS;
-    return t0 < best.t || (best.prim_id == PRIM_MISS && t0 <= best.t);
+    float reach = best_reach(best);
+    return t0 < reach || (best.prim_id == PRIM_MISS && t0 <= reach);
 }
 
 // Returns false when this lane's traversal was cut short.

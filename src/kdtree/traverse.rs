@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::links::{TreeLinks, NO_ROPE};
 use super::KdNode;
 use crate::consts::{MAX_SHORT_STACK, MAX_STACK, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
-use crate::geom::{Aabb, Hit, Ray, TriTest, WatertightRay};
+use crate::geom::{Aabb, Hit, Ray, TriTest, WatertightRay, EDGE_GAMMA};
 
 /// The traversal algorithms (specialization constant `VARIANT` of `trace.comp`),
 /// each in its own file under `glsl/traverse/` with its twin below.
@@ -275,7 +275,7 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             any_hit: traversal.any_hit,
         };
         if let Some((t0, t1)) = clip_to_box(&r, &scene.bounds) {
-            let mut s = State { scene, r: &r, best: &mut best, c: &mut c };
+            let mut s = State { scene, r: &r, best: &mut best, closest: Closest::NONE, c: &mut c };
             let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
             let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
             let finished = match traversal.variant {
@@ -305,8 +305,24 @@ struct State<'s, 'a> {
     scene: &'s SceneRef<'a>,
     r: &'s TraceRay,
     best: &'s mut Hit,
+    closest: Closest,
     c: &'s mut Counters,
 }
+
+/// The best hit's reference (an index of `prim_indices`) and a bound on the
+/// error of its `t`: `best_ref` and `best_err` in common.glsl.
+#[derive(Clone, Copy)]
+struct Closest {
+    reference: u32,
+    err: f32,
+}
+
+impl Closest {
+    const NONE: Closest = Closest { reference: NO_REF, err: 0.0 };
+}
+
+/// No reference (`NO_REF` in common.glsl).
+const NO_REF: u32 = u32::MAX;
 
 impl State<'_, '_> {
     /// Fetches a node, counting the visit and the loop step.
@@ -316,15 +332,21 @@ impl State<'_, '_> {
         self.scene.nodes[node as usize]
     }
 
+    /// The farthest `t` at which the closest hit's exact `t` may lie (`best_reach`
+    /// in common.glsl): cells beyond it cannot hold a closer hit.
+    fn reach(&self) -> f32 {
+        self.best.t + self.closest.err
+    }
+
     /// Tests a leaf; true when traversal is done: an any-hit found one, or the
     /// closest hit lies inside the leaf's segment (which ends at `t1`).
     fn leaf(&mut self, n: KdNode, t1: f32) -> bool {
         self.c.leaves += 1;
-        intersect_leaf(self.scene, self.r, n, self.best, self.c);
+        intersect_leaf(self.scene, self.r, n, self.best, &mut self.closest, self.c);
         if self.r.any_hit {
             self.best.prim_id != PRIM_MISS
         } else {
-            self.best.t <= t1
+            self.reach() <= t1
         }
     }
 }
@@ -456,38 +478,96 @@ fn decide_children(
 }
 
 /// Twin of `intersect_leaf` in common.glsl. Any-hit mode stops at the first hit.
-/// The f32 tests first, then the f64 tests of the pairs they left unsure, in
-/// leaf order (as the shader does, see common.glsl).
-fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, c: &mut Counters) {
+/// The f32 tests first, then a second pass in f64 over the pairs they left
+/// unsure and, when robust, over depth ties: hits whose f32 `t` lie within
+/// rounding of the closest one's, ordered by their f64 `t` (see common.glsl).
+fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, closest: &mut Closest, c: &mut Counters) {
     let offset = n.prim_offset() as usize;
     let count = n.prim_count() as usize;
-    let prims = &scene.prim_indices[offset..offset + count];
-    let mut unsure = false;
-    for (i, &prim) in prims.iter().enumerate() {
-        let [v0, v1, v2] = scene.triangles[prim as usize];
-        match r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t) {
-            TriTest::Hit(t, u, v) => {
-                *best = Hit { t, prim_id: prim, u, v };
-                if r.any_hit {
-                    c.triangles += i as u32 + 1;
-                    return;
+    let triangle = |reference: u32| {
+        let prim = scene.prim_indices[reference as usize];
+        (prim, scene.triangles[prim as usize])
+    };
+    let in_ref = closest.reference;
+    let mut unsure = 0usize;
+    let mut first_unsure = count;
+    let mut tie = false;
+    for i in 0..count {
+        let (prim, [v0, v1, v2]) = triangle((offset + i) as u32);
+        match r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t + closest.err) {
+            TriTest::Hit(t, u, v, e) => {
+                // [t - e, t + e] meets the closest hit's interval: order them in f64
+                // (unless it is the same triangle, met again in another leaf).
+                if r.wr.robust
+                    && !r.any_hit
+                    && closest.reference != NO_REF
+                    && prim != best.prim_id
+                    && t + e >= best.t - closest.err
+                {
+                    tie = true;
+                }
+                if t <= best.t {
+                    *best = Hit { t, prim_id: prim, u, v };
+                    *closest = Closest { reference: (offset + i) as u32, err: e };
+                    if r.any_hit {
+                        c.triangles += i as u32 + 1;
+                        return;
+                    }
                 }
             }
-            TriTest::Unsure => unsure = true,
+            TriTest::Unsure => {
+                first_unsure = first_unsure.min(i);
+                unsure += 1;
+            }
             TriTest::Miss => {}
         }
     }
     c.triangles += count as u32;
-    if !unsure {
+    if unsure == 0 && !tie {
         return;
     }
-    for &prim in prims {
-        let [v0, v1, v2] = scene.triangles[prim as usize];
-        if r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t) != TriTest::Unsure {
-            continue;
+    // The second pass: the closest hit on entry (after a tie), the closest after
+    // the f32 pass, then the leaf's triangles; each tested again (same bits).
+    let window = best.t + closest.err;
+    let w_ref = closest.reference;
+    let before = [
+        (tie && in_ref != NO_REF && in_ref != w_ref).then_some(in_ref),
+        (!r.any_hit && w_ref != NO_REF).then_some(w_ref),
+    ];
+    let first = if tie { 0 } else { first_unsure };
+    let mut bar = f64::INFINITY;
+    let leaf = (first..count).map(|i| ((offset + i) as u32, true));
+    // (reference, whether it is one of the leaf's triangles)
+    for (reference, in_leaf) in before.into_iter().flatten().map(|r| (r, false)).chain(leaf) {
+        if in_leaf && !(tie || unsure > 0) {
+            break;
         }
-        if let Some((t, u, v)) = r.wr.intersect_f64(v0, v1, v2, r.tmin, best.t) {
-            *best = Hit { t, prim_id: prim, u, v };
+        let (prim, [v0, v1, v2]) = triangle(reference);
+        let result = r.wr.intersect_f32(v0, v1, v2, r.tmin, window);
+        let unsure_pair = result == TriTest::Unsure;
+        if unsure_pair && in_leaf {
+            unsure -= 1;
+        }
+        let (mut hit, mut e) = match result {
+            TriTest::Hit(t, u, v, e) if !in_leaf || (tie && reference != w_ref) => (Hit { t, prim_id: prim, u, v }, e),
+            TriTest::Unsure => (Hit { t: f32::NAN, prim_id: prim, u: 0.0, v: 0.0 }, 0.0),
+            _ => continue,
+        };
+        let t64 = match r.wr.intersect_f64(v0, v1, v2, r.tmin) {
+            Some((t, u, v, t64)) => {
+                // An unsure pair takes the f64 answer; a certain f32 hit keeps its f32 values.
+                if unsure_pair {
+                    (hit, e) = (Hit { t, prim_id: prim, u, v }, EDGE_GAMMA * t.abs());
+                }
+                t64
+            }
+            None if unsure_pair => continue,
+            None => hit.t as f64, // a certain f32 hit the f64 test rejects: keep its f32 t
+        };
+        if t64 <= bar {
+            bar = t64;
+            *best = hit;
+            *closest = Closest { reference, err: e };
             if r.any_hit {
                 return;
             }
@@ -526,7 +606,7 @@ fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
                 return true;
             }
             // Only entries starting before the hit can hold a closer one (stack.glsl).
-            while sp > 0 && !starts_before(stack[sp - 1].1, s.best.t) {
+            while sp > 0 && !starts_before(stack[sp - 1].1, s.reach()) {
                 sp -= 1;
             }
         }
@@ -573,7 +653,7 @@ fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, known
         if matches!(visit, Visit::Both | Visit::BothSame) {
             let far_t0 = if visit == Visit::Both { ts } else { t0 };
             if child == near {
-                if !done || starts_before(far_t0, s.best.t) {
+                if !done || starts_before(far_t0, s.reach()) {
                     found = Successor::Found { node: far, t0: far_t0, t1, above: pending };
                 }
                 pending += 1;
@@ -677,7 +757,7 @@ fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
         }
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.best.t);
+        t1 = glsl_min(t1_scene, s.reach());
         node = 0;
         exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
         t1_plane = ExitPlane::None;
@@ -726,7 +806,7 @@ fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
         }
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.best.t);
+        t1 = glsl_min(t1_scene, s.reach());
         node = restart_node;
         push_down = true;
         exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
@@ -796,7 +876,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
                 return true;
             }
             // As in trace_stack: only entries starting before the hit can hold a closer one.
-            while count > 0 && !starts_before(stack[(head + size - 1) % size].1, s.best.t) {
+            while count > 0 && !starts_before(stack[(head + size - 1) % size].1, s.reach()) {
                 head = (head + size - 1) % size;
                 count -= 1;
             }
@@ -834,7 +914,7 @@ fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size: usize, use
         }
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.best.t);
+        t1 = glsl_min(t1_scene, s.reach());
         node = restart_node;
         push_down = use_push_down;
         exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
@@ -957,7 +1037,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         if exit <= t0 {
             return true; // the root's box ends here: nothing left
         }
-        t1 = glsl_min(glsl_min(exit, t1_scene), s.best.t);
+        t1 = glsl_min(glsl_min(exit, t1_scene), s.reach());
         t1_plane = if t1 == exit { box_face_plane(&links.boxes[node as usize], face) } else { ExitPlane::None };
         exit_plane = ExitPlane::Any;
         s.c.restarts += 1;
@@ -1009,7 +1089,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         crossed = box_face_plane(b, face);
         // Never step backwards: keep t0 when rounding puts the exit behind it.
         t0 = glsl_max(t0, leaf_t1);
-        t1 = glsl_min(t1_scene, s.best.t);
+        t1 = glsl_min(t1_scene, s.reach());
         node = next;
         exit_plane = ExitPlane::Any;
         s.c.restarts += 1;
