@@ -3,9 +3,12 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use glam::Vec3;
 use kdtrace::consts::{PRIM_INVALID, PRIM_MISS};
+use kdtrace::gpu::GpuContext;
 use kdtrace::kdtree::links::TreeLinks;
 use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
@@ -40,17 +43,36 @@ fn all_traversals() -> Vec<Traversal> {
     all
 }
 
-fn check_scene(name: &str, random: usize) {
-    check_scene_sized(name, (64, 48), random);
+/// Checks each scene in turn on one tracer (so each of the 36 kernels compiles
+/// once): `(file, camera resolution, random rays)`. The Stanford scenes may not be
+/// committed: `tools/fetch-scenes` puts them in `scenes/` (CI runs it); without
+/// them they are skipped with a message.
+fn check_scenes(scenes: &[(&str, (u32, u32), usize)]) {
+    let ctx = context();
+    let mut tracer = None;
+    for &(name, size, random) in scenes {
+        if !scene_path(name).exists() {
+            eprintln!("{name} is missing: run tools/fetch-scenes to test it");
+            continue;
+        }
+        check_scene(&ctx, &mut tracer, name, size, random);
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
 }
 
-fn check_scene_sized(name: &str, (width, height): (u32, u32), random: usize) {
+fn check_scene(
+    ctx: &Arc<GpuContext>,
+    tracer: &mut Option<Tracer>,
+    name: &str,
+    (width, height): (u32, u32),
+    random: usize,
+) {
     let path = scene_path(name);
     let scene = Scene::load(&path).unwrap();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let links = TreeLinks::new(&tree.nodes, tree.bounds);
-    let ctx = context();
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let tracer = common::load_scene(tracer, ctx, &tree, &scene.triangles);
 
     let stem = path.file_stem().unwrap().to_string_lossy().to_string();
     let camera = Camera::from_cameras_json(&scene_path("cameras.json"), &stem)
@@ -147,43 +169,17 @@ fn check_scene_sized(name: &str, (width, height): (u32, u32), random: usize) {
         }
     }
     eprintln!("{name}: every traversal (closest and any-hit) equals its CPU twin and the stack baseline");
-    drop(tracer);
-    assert_validation_clean(&ctx);
+}
+
+// Two tests of about equal work, so the two test threads share it.
+#[test]
+fn cornell_box_teapot_and_bunny_match_cpu_and_reference() {
+    check_scenes(&[("cornell_box.obj", (64, 48), 2000), ("teapot.obj", (64, 48), 3000), ("bunny.obj", (24, 16), 400)]);
 }
 
 #[test]
-fn cornell_box_matches_cpu_and_reference() {
-    check_scene("cornell_box.obj", 2000);
-}
-
-#[test]
-fn teapot_matches_cpu_and_reference() {
-    check_scene("teapot.obj", 3000);
-}
-
-#[test]
-fn q3_20kdm2_matches_cpu_and_reference() {
-    check_scene("q3_20kdm2.obj", 3000);
-}
-
-/// The Stanford scenes may not be committed: `tools/fetch-scenes` puts them in
-/// `scenes/` (CI runs it). Without them these tests say so and pass.
-fn check_fetched_scene(name: &str, random: usize) {
-    if !scene_path(name).exists() {
-        eprintln!("{name} is missing: run tools/fetch-scenes to test it");
-        return;
-    }
-    check_scene_sized(name, (24, 16), random);
-}
-
-#[test]
-fn bunny_matches_cpu_and_reference_when_fetched() {
-    check_fetched_scene("bunny.obj", 400);
-}
-
-#[test]
-fn dragon_matches_cpu_and_reference_when_fetched() {
-    check_fetched_scene("dragon_200k.obj", 300);
+fn q3_20kdm2_and_dragon_match_cpu_and_reference() {
+    check_scenes(&[("q3_20kdm2.obj", (64, 48), 3000), ("dragon_200k.obj", (24, 16), 300)]);
 }
 
 #[test]

@@ -103,16 +103,19 @@ fn packets_match_single_rays_at_device_subgroup_size() {
     }
     let widths: Vec<u32> = [2, 4, 8, 16, 32].into_iter().filter(|&w| w <= subgroup).collect();
     assert!(!widths.is_empty(), "{} has subgroups of {subgroup}: no packets to test", ctx.info);
+    // One tracer for every scene, so each packet kernel is compiled once.
+    let mut tracer: Option<Tracer> = None;
     for name in ["teapot", "q3_20kdm2", "cornell_box"] {
         let path = scene_path(&format!("{name}.obj"));
         let scene = Scene::load(&path).unwrap();
         let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
-        let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, &scene.triangles);
         let camera = Camera::from_cameras_json(&scene_path("cameras.json"), name).unwrap().unwrap();
         let (mut rays, _) = camera_rays_morton(&camera, 48, 40);
         rays.extend(random_rays(&mut Rng(11), scene.bounds.min, scene.bounds.max, 1500));
-        check_scene(&mut tracer, &tree, &scene, &rays, &widths, name);
+        check_scene(tracer, &tree, &scene, &rays, &widths, name);
     }
+    drop(tracer);
     assert_validation_clean(&ctx);
 }
 

@@ -14,9 +14,12 @@
 
 mod common;
 
+use std::sync::Arc;
+
 use common::{assert_validation_clean, context, scene_path};
 use glam::Vec3;
 use kdtrace::exact::{judge, Exact};
+use kdtrace::gpu::GpuContext;
 use kdtrace::kdtree::links::TreeLinks;
 use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
@@ -84,11 +87,29 @@ fn scaled_scene(name: &str, scale: f32) -> (Scene, KdTree, TreeLinks) {
     (scene, tree, links)
 }
 
-fn stress_scene(name: &str, scale: f32) {
+/// Stresses each (scene, scale) in turn on one tracer (so each kernel compiles once).
+fn stress_scenes(scenes: &[(&str, f32)]) {
+    let ctx = context();
+    let mut tracer = None;
+    let mut failures = Vec::new();
+    for &(name, scale) in scenes {
+        stress_scene(&ctx, &mut tracer, name, scale, &mut failures);
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
+}
+
+fn stress_scene(
+    ctx: &Arc<GpuContext>,
+    tracer: &mut Option<Tracer>,
+    name: &str,
+    scale: f32,
+    failures: &mut Vec<String>,
+) {
     let (scene, tree, links) = scaled_scene(name, scale);
     let triangles = &scene.triangles;
-    let ctx = context();
-    let mut tracer = Tracer::new(&ctx, &tree, triangles).unwrap();
+    let tracer = common::load_scene(tracer, ctx, &tree, triangles);
     let batches: Vec<Batch> = Category::ALL
         .iter()
         .map(|&c| stress_rays(c, triangles, &tree, RAYS, 7))
@@ -100,7 +121,6 @@ fn stress_scene(name: &str, scale: f32) {
             (c, rays, exacts, stack)
         })
         .collect();
-    let mut failures = Vec::new();
     for traversal in traversals() {
         for gpu in [true, false] {
             if !gpu && traversal != Traversal::closest(Variant::Stack) && traversal.variant != Variant::Ropes {
@@ -179,24 +199,16 @@ fn stress_scene(name: &str, scale: f32) {
         }
         println!("{}", table_row(&format!("{} any-hit, all categories", describe(&traversal)), &shadow));
     }
-    assert_validation_clean(&ctx);
-    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
 
 #[test]
-fn stress_cornell_box() {
-    stress_scene("cornell_box.obj", 1.0);
-}
-
-#[test]
-fn stress_teapot() {
-    stress_scene("teapot.obj", 1.0);
+fn stress_shared_scenes() {
+    stress_scenes(&[("cornell_box.obj", 1.0), ("teapot.obj", 1.0)]);
 }
 
 #[test]
 fn stress_scaled_scenes() {
-    stress_scene("teapot.obj", 1e-4);
-    stress_scene("cornell_box.obj", 1e5);
+    stress_scenes(&[("teapot.obj", 1e-4), ("cornell_box.obj", 1e5)]);
 }
 
 /// The GPU kernels equal their CPU twins on hard rays too, hits and counters bit
@@ -206,11 +218,12 @@ fn stress_scaled_scenes() {
 #[test]
 fn stress_rays_gpu_equals_cpu_twin() {
     let mut failures = Vec::new();
+    let ctx = context();
+    let mut tracer = None;
     for (name, scale) in [("teapot.obj", 1.0f32), ("teapot.obj", 1e5), ("cornell_box.obj", 1.0)] {
         let (scene, tree, links) = scaled_scene(name, scale);
         let triangles = &scene.triangles;
-        let ctx = context();
-        let mut tracer = Tracer::new(&ctx, &tree, triangles).unwrap();
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
         let rays: Vec<Ray> = Category::ALL.iter().flat_map(|&c| stress_rays(c, triangles, &tree, 300, 3)).collect();
         for variant in Variant::ALL {
             for any_hit in [false, true] {
@@ -242,8 +255,9 @@ fn stress_rays_gpu_equals_cpu_twin() {
                 }
             }
         }
-        assert_validation_clean(&ctx);
     }
+    drop(tracer);
+    assert_validation_clean(&ctx);
     assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
 
@@ -280,12 +294,13 @@ fn closed_meshes_have_no_holes() {
         ("perturbed sphere 6", common::sphere(6, 0.05, 3)),
     ];
     let rays_per_mesh = 1_000_000 / meshes.len() + 1;
+    let mut tracer = None;
     let mut total = 0usize;
     let mut failures = Vec::new();
     for (name, tris) in &meshes {
         let tree = KdTree::build(tris, &BuildConfig::default());
         let links = TreeLinks::new(&tree.nodes, tree.bounds);
-        let mut tracer = Tracer::new(&ctx, &tree, tris).unwrap();
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, tris);
         let rays = inside_rays(tris, rays_per_mesh, name.len() as u64);
         for traversal in traversals() {
             let hits = match tracer.trace(&rays, &TraceOptions { traversal, counters: false }) {
@@ -323,6 +338,7 @@ fn closed_meshes_have_no_holes() {
         total += rays.len();
     }
     assert!(total >= 1_000_000);
+    drop(tracer);
     assert_validation_clean(&ctx);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

@@ -6,6 +6,8 @@ use std::sync::Arc;
 
 use glam::Vec3;
 use kdtrace::gpu::{ContextOptions, GpuContext, Validation};
+use kdtrace::kdtree::KdTree;
+use kdtrace::trace::Tracer;
 use kdtrace::Ray;
 
 /// A headless context on the default device (lavapipe here) with the validation
@@ -130,4 +132,23 @@ pub fn sphere(levels: u32, bump: f32, seed: u64) -> Vec<[Vec3; 3]> {
         *v *= 1.0 + bump * (rng.next_f32() - 0.5);
     }
     faces.iter().map(|f| f.map(|i| verts[i])).collect()
+}
+
+/// Puts a scene into `tracer`, creating the tracer on first use. A tracer keeps
+/// its compiled pipelines across `replace_scene`, so a test that loops over scenes
+/// compiles each kernel once (lavapipe has no pipeline cache, and compiling
+/// dominated such tests when every scene got a new tracer).
+pub fn load_scene<'a>(
+    tracer: &'a mut Option<Tracer>,
+    ctx: &Arc<GpuContext>,
+    tree: &KdTree,
+    triangles: &[[Vec3; 3]],
+) -> &'a mut Tracer {
+    match tracer {
+        Some(t) => {
+            t.replace_scene(tree, triangles).expect("replacing the tracer's scene");
+            t
+        }
+        None => tracer.insert(Tracer::new(ctx, tree, triangles).expect("uploading the scene")),
+    }
 }
