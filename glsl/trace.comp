@@ -23,6 +23,7 @@ layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1.
 layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
 layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
 layout(constant_id = 5) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
+layout(constant_id = 6) const uint PASS = PASS_ONE;   // PASS_FAST / PASS_CAREFUL: robust single rays (see main)
 
 #include "triangle.glsl"
 
@@ -44,6 +45,9 @@ layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Counters { 
 layout(std430, set = 0, binding = BINDING_PARENTS) readonly buffer Parents { uint parents[]; };
 layout(std430, set = 0, binding = BINDING_NODE_BOXES) readonly buffer NodeBoxes { float node_boxes[]; };
 layout(std430, set = 0, binding = BINDING_ROPES) readonly buffer Ropes { uint ropes[]; };
+// The rays the fast pass leaves to the careful pass: the indirect dispatch's
+// arguments (x, y, z), their count, then their indices (src/consts.rs).
+layout(std430, set = 0, binding = BINDING_CAREFUL) coherent buffer Careful { uint careful[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
 
@@ -102,9 +106,10 @@ bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Hit best, i
     return finished;
 }
 
-void main() {
-    uint index = gl_GlobalInvocationID.x;
-    if (index >= params.ray_count) return;
+// Traces ray `index` and writes its hit (and counters). In the fast pass, a ray
+// that met a pair the f32 tests could not decide is listed for the careful pass
+// instead, and nothing is written for it.
+void trace_ray(uint index) {
     uvec2 w0 = unpackDouble2x32(ray_words[4u * index + 0u]);
     uvec2 w1 = unpackDouble2x32(ray_words[4u * index + 1u]);
     uvec2 w2 = unpackDouble2x32(ray_words[4u * index + 2u]);
@@ -115,6 +120,10 @@ void main() {
     ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
     ray.tmax = uintBitsToFloat(w3.y);
 
+    // Per-ray state of common.glsl (the careful pass may trace several rays).
+    needs_careful = false;
+    best_ref = NO_REF;
+    best_err = 0.0;
     Hit best;
     best.t = ray.tmax;
     best.prim_id = PRIM_MISS;
@@ -139,23 +148,19 @@ void main() {
     float t0 = 0.0, t1 = 0.0;
     bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
     if (!valid) best.prim_id = PRIM_INVALID;
-    // Robust single rays trace fast first, then carefully when the fast trace met a
-    // pair it could not decide in f32 (see careful_pass in common.glsl). Packets
-    // trace once, carefully: their kernels are large (two copies would double the
-    // compile time) and slower than single rays on lavapipe anyway.
-    bool two_pass = ROBUST && PACKET_WIDTH == 1u;
-    careful_pass = !two_pass;
+    // Robust single rays trace fast first, then carefully in a second dispatch when
+    // the fast trace met what it could not decide in f32 (see careful_pass in
+    // common.glsl). Packets trace once, carefully: their kernels are large and
+    // slower than single rays on lavapipe anyway.
     bool finished = run_traversal(alive, r, t0, t1, best, c);
-    if (two_pass && alive && needs_careful) {
-        careful_pass = true;
-        best.t = ray.tmax;
-        best.prim_id = PRIM_MISS;
-        best.u = 0.0;
-        best.v = 0.0;
-        best_ref = NO_REF;
-        best_err = 0.0;
-        c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
-        finished = run_traversal(true, r, t0, t1, best, c);
+    if (PASS == PASS_FAST && alive && needs_careful) {
+        uint slot = atomicAdd(careful[3], 1u);
+        careful[CAREFUL_HEADER_WORDS + slot] = index;
+        // One more workgroup for the careful pass at every TRACE_WORKGROUP_SIZE-th ray.
+        if (slot % TRACE_WORKGROUP_SIZE == 0u && slot / TRACE_WORKGROUP_SIZE < CAREFUL_MAX_GROUPS) {
+            atomicAdd(careful[0], 1u);
+        }
+        return;
     }
     if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
     if (best.prim_id >= PRIM_INCOMPLETE) {
@@ -172,5 +177,18 @@ void main() {
         counters[base + COUNTER_RESTARTS] = c.restarts;
         counters[base + COUNTER_STEPS] = c.steps;
         counters[base + COUNTER_DROPS] = c.drops;
+    }
+}
+
+void main() {
+    uint id = gl_GlobalInvocationID.x;
+    if (PASS == PASS_CAREFUL) {
+        // The listed rays; more than the dispatch covers are taken in strides.
+        uint count = careful[3];
+        for (uint k = id; k < count; k += CAREFUL_MAX_GROUPS * TRACE_WORKGROUP_SIZE) {
+            trace_ray(careful[CAREFUL_HEADER_WORDS + k]);
+        }
+    } else if (id < params.ray_count) {
+        trace_ray(id);
     }
 }

@@ -68,8 +68,25 @@ pub const BINDING_PARENTS: u32 = 6;
 pub const BINDING_NODE_BOXES: u32 = 7;
 /// Binding of the leaf ropes (6 `u32` per node, `NO_ROPE` on the boundary; `ropes` only).
 pub const BINDING_ROPES: u32 = 8;
+/// Binding of the careful-pass list of robust single-ray traces (a dummy otherwise):
+/// `u32` words, `CAREFUL_HEADER_WORDS` of header (`vkCmdDispatchIndirect` arguments
+/// x, y, z, then the count), then the indices of the rays the fast pass left.
+pub const BINDING_CAREFUL: u32 = 9;
 /// Number of bindings of the trace kernel.
-pub const TRACE_BINDINGS: u32 = 9;
+pub const TRACE_BINDINGS: u32 = 10;
+/// Words before the ray indices in the careful-pass list.
+pub const CAREFUL_HEADER_WORDS: u32 = 4;
+/// Workgroups the careful pass dispatches at most (Vulkan's guaranteed minimum of
+/// `maxComputeWorkGroupCount[0]`); more listed rays are taken in strides.
+pub const CAREFUL_MAX_GROUPS: u32 = 65535;
+
+// The passes of the trace kernel (specialization constant `PASS`).
+/// One pass: packets, the plain kernels, and variants traced carefully at once.
+pub const PASS_ONE: u32 = 0;
+/// Robust single rays, first pass: trace fast; list the rays that need the careful pass.
+pub const PASS_FAST: u32 = 1;
+/// Robust single rays, second pass (dispatched indirectly): trace the listed rays carefully.
+pub const PASS_CAREFUL: u32 = 2;
 
 // Per-ray counters written when counters are on (u32 each), indices within a ray's record.
 /// Counter index of node fetches (interior and leaf, backtrack climbs included).
@@ -116,6 +133,12 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("BINDING_PARENTS", BINDING_PARENTS),
     ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
     ("BINDING_ROPES", BINDING_ROPES),
+    ("BINDING_CAREFUL", BINDING_CAREFUL),
+    ("CAREFUL_HEADER_WORDS", CAREFUL_HEADER_WORDS),
+    ("CAREFUL_MAX_GROUPS", CAREFUL_MAX_GROUPS),
+    ("PASS_ONE", PASS_ONE),
+    ("PASS_FAST", PASS_FAST),
+    ("PASS_CAREFUL", PASS_CAREFUL),
     ("COUNTER_NODES", COUNTER_NODES),
     ("COUNTER_LEAVES", COUNTER_LEAVES),
     ("COUNTER_TRIANGLES", COUNTER_TRIANGLES),

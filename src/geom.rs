@@ -349,29 +349,25 @@ impl WatertightRay {
         let bz = self.sz * b[kz];
         let cz = self.sz * c[kz];
         let t_scaled = u * az + v * bz + w * cz;
-        // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
-        // ending on a vertex): decide in f64 which side of the bound it lies on.
-        let t_err = EDGE_GAMMA * ((u * az).abs() + (v * bz).abs() + (w * cz).abs());
-        // The edge functions' errors δu_i move t_scaled − b·det by Σ δu_i (z_i − b).
-        let at_tmin = t_scaled - tmin * det;
-        let at_tmax = t_scaled - self.ray_tmax * det;
-        let weights_err = eu + ev + ew;
-        let dev = |b: f32| (az - b).abs().max((bz - b).abs()).max((cz - b).abs());
-        let near_tmin =
-            !tmin.is_infinite() && at_tmin.abs() <= t_err + weights_err * dev(tmin) + EDGE_GAMMA * (tmin * det).abs();
-        let near_tmax = !self.ray_tmax.is_infinite()
-            && at_tmax.abs() <= t_err + weights_err * dev(self.ray_tmax) + EDGE_GAMMA * (self.ray_tmax * det).abs();
-        if self.robust && (near_tmin || near_tmax) {
-            return TriTest::Unsure;
-        }
         let rcp_det = 1.0 / det;
         let t = t_scaled * rcp_det;
         let mut e = 0.0;
         if self.robust {
-            // t − exact t = (Σ δu_i (z_i − t) + rounding of t_scaled − t · rounding of
-            // det) / det, and |z_i − t| is at most the spread of the z_i.
+            // A bound on |t − exact t|: the edge functions' errors δu_i move t_scaled −
+            // t·det by Σ δu_i (z_i − t), and |z_i − t| is at most the spread of the z_i;
+            // then the roundings of t_scaled, det and t.
+            let t_err = EDGE_GAMMA * ((u * az).abs() + (v * bz).abs() + (w * cz).abs());
+            let weights_err = eu + ev + ew;
             let spread = az.max(bz).max(cz) - az.min(bz).min(cz);
             e = (t_err + weights_err * spread + EDGE_GAMMA * t_scaled.abs()) / det.abs() + EDGE_GAMMA * t.abs();
+            // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
+            // surface, a shadow ray ending on a vertex): decide in f64 which side of the
+            // bound it lies on (see triangle.glsl).
+            let near_tmin = !tmin.is_infinite() && (t - tmin).abs() <= e;
+            let near_tmax = !self.ray_tmax.is_infinite() && (t - self.ray_tmax).abs() <= e;
+            if near_tmin || near_tmax {
+                return TriTest::Unsure;
+            }
         }
         let below = t <= tmax || (self.robust && t - e <= tmax && t <= self.ray_tmax);
         if !(t >= tmin && below) {

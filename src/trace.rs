@@ -22,11 +22,17 @@
 //!
 //! # Recording into your command buffer
 //!
-//! [`Tracer::record_trace`] records one compute dispatch into `cmd` that reads
-//! `count` rays ([`Ray`], 32 bytes each) from a range of your buffer and writes
-//! `count` hits ([`Hit`], 16 bytes each) into a range of another (or of the same
-//! buffer, not overlapping). It never submits, waits or allocates memory, and it
-//! records no barriers: synchronisation is yours, as follows.
+//! [`Tracer::record_trace`] records into `cmd` the trace of `count` rays ([`Ray`],
+//! 32 bytes each) read from a range of your buffer, writing `count` hits ([`Hit`],
+//! 16 bytes each) into a range of another (or of the same buffer, not
+//! overlapping). It never submits, waits or allocates memory. With the
+//! robustness measures on and single rays (the default) it records two compute
+//! dispatches: a fast pass, and an indirect careful pass over the rays the fast
+//! one listed in the binding's own list buffer, which it empties first
+//! (`vkCmdUpdateBuffer`), with global memory barriers between these steps that
+//! order them (and an earlier recording's careful pass before the list is
+//! emptied again). Otherwise it records one dispatch and no barrier. Synchronisation
+//! of your buffers is yours, as follows.
 //!
 //! - **Before**: make your writes of the rays available to the compute shader
 //!   stage, and finish earlier accesses of the hit range, e.g. a
@@ -38,8 +44,8 @@
 //!   `COMPUTE_SHADER`/`SHADER_WRITE` to the reader's stage and access
 //!   (`COMPUTE_SHADER`/`SHADER_READ`, `TRANSFER`/`TRANSFER_READ`, `HOST`/`HOST_READ`).
 //!   Before you overwrite the rays again, an execution dependency after `COMPUTE_SHADER`.
-//! - **State**: the dispatch binds kdtrace's compute pipeline, its descriptor set 0
-//!   and its push constants in `cmd`; rebind your own compute state after it.
+//! - **State**: the dispatches bind kdtrace's compute pipelines, its descriptor
+//!   set 0 and its push constants in `cmd`; rebind your own compute state after them.
 //! - **Queues**: `cmd` must come from a pool of a compute-capable queue family of
 //!   the context's device; buffers with exclusive sharing must be owned by that
 //!   family. The scene buffers need no barrier (their upload was waited for).
@@ -79,10 +85,10 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS, BINDING_PRIM_INDICES,
-    BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES,
-    COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, MAX_TRAVERSAL_STEPS, PRIM_INCOMPLETE, TRACE_BINDINGS,
-    TRACE_WORKGROUP_SIZE,
+    BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS,
+    BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY,
+    COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
+    MAX_TRAVERSAL_STEPS, PASS_CAREFUL, PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -223,8 +229,18 @@ pub struct Tracer {
     generation: u64,
     /// Bound in place of buffers a dispatch does not use (side buffers, counters).
     dummy: Buffer,
-    kernels: Vec<((Traversal, bool), Kernel)>,
+    kernels: Vec<((Traversal, bool), TraceKernels)>,
     chunk: usize,
+}
+
+/// The pipelines of one traversal and counter setting: one pass, or for robust
+/// single rays a fast pass and a careful pass over the rays the fast one listed
+/// (dispatched indirectly). On SIMD drivers such as lavapipe, which run every
+/// branch of a kernel under a mask, one kernel holding both traces paid for the
+/// careful one in every subgroup; two kernels pay for it only where rays need it.
+struct TraceKernels {
+    main: Kernel,
+    careful: Option<Kernel>,
 }
 
 /// The descriptor set of one traced configuration: the tracer's scene buffers,
@@ -232,12 +248,17 @@ pub struct Tracer {
 /// Made by [`Tracer::bind`] or returned by [`Tracer::record_trace`]; recorded
 /// with [`Tracer::record_binding`].
 ///
-/// Dropping it destroys its descriptor set, so keep it until every command buffer
-/// it was recorded into has completed. It is never rewritten, so it may be
-/// recorded into several command buffers, pending ones included.
+/// Dropping it destroys its descriptor set (and list buffer), so keep it until
+/// every command buffer it was recorded into has completed. The descriptor set is
+/// never rewritten, so it may be recorded into several command buffers, pending
+/// ones included; but the careful pass's list buffer (robust single rays) is
+/// shared by its recordings, so they must not execute at the same time on
+/// different queues (on one queue the recorded barriers order them).
 #[must_use = "the descriptor set must live until the command buffer that uses it completes"]
 pub struct TraceBinding {
     set: BufferSet,
+    /// The careful pass's list (robust single rays): indirect arguments, count, ray indices.
+    careful: Option<Buffer>,
     kernel: usize,
     pipeline: vk::Pipeline,
     generation: u64,
@@ -377,36 +398,55 @@ impl Tracer {
         if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (key, counters)) {
             return Ok(i);
         }
-        let kernel = Kernel::new(
-            &self.ctx,
-            &KernelDesc {
-                name: "trace",
-                spirv: shaders::TRACE,
-                bindings: TRACE_BINDINGS,
-                push_constant_size: std::mem::size_of::<TraceParams>() as u32,
-                spec_constants: &[
-                    key.variant.id(),
-                    counters as u32,
-                    key.stack_size,
-                    key.any_hit as u32,
-                    key.packet_width,
-                    key.robust as u32,
-                ],
-                workgroup_size: TRACE_WORKGROUP_SIZE,
-                required_subgroup_size: key.subgroup_size,
-                texel_buffers: &[
-                    (BINDING_NODES, vk::Format::R32G32_UINT),
-                    (BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
-                ],
-                // Packets decide by ballots.
-                required_subgroup_operations: if key.packet_width > 1 {
-                    vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
-                } else {
-                    vk::SubgroupFeatureFlags::empty()
-                },
+        let desc = KernelDesc {
+            name: "trace",
+            spirv: shaders::TRACE,
+            bindings: TRACE_BINDINGS,
+            push_constant_size: std::mem::size_of::<TraceParams>() as u32,
+            spec_constants: &[],
+            workgroup_size: TRACE_WORKGROUP_SIZE,
+            required_subgroup_size: key.subgroup_size,
+            texel_buffers: &[
+                (BINDING_NODES, vk::Format::R32G32_UINT),
+                (BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
+            ],
+            // Packets decide by ballots.
+            required_subgroup_operations: if key.packet_width > 1 {
+                vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
+            } else {
+                vk::SubgroupFeatureFlags::empty()
             },
-        )?;
-        self.kernels.push(((key, counters), kernel));
+        };
+        let spec = |pass: u32| {
+            [
+                key.variant.id(),
+                counters as u32,
+                key.stack_size,
+                key.any_hit as u32,
+                key.packet_width,
+                key.robust as u32,
+                pass,
+            ]
+        };
+        let kernels = if key.robust && !key.uses_packets() {
+            // Robust single rays: the fast and the careful pass, compiled side by side.
+            let (fast_spec, careful_spec) = (spec(PASS_FAST), spec(PASS_CAREFUL));
+            let ctx = &self.ctx;
+            let (main, careful) = std::thread::scope(|s| {
+                let careful =
+                    s.spawn(|| Kernel::new(ctx, &KernelDesc { spec_constants: &careful_spec, ..desc.clone() }));
+                let main = Kernel::new(ctx, &KernelDesc { spec_constants: &fast_spec, ..desc.clone() });
+                (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+            });
+            TraceKernels { main: main?, careful: Some(careful?) }
+        } else {
+            let one = spec(PASS_ONE);
+            TraceKernels {
+                main: Kernel::new(&self.ctx, &KernelDesc { spec_constants: &one, ..desc.clone() })?,
+                careful: None,
+            }
+        };
+        self.kernels.push(((key, counters), kernels));
         Ok(self.kernels.len() - 1)
     }
 
@@ -521,24 +561,39 @@ impl Tracer {
             ranges[BINDING_ROPES as usize] = BufferRange::whole(ropes);
         }
         let k = &self.kernels[kernel].1;
-        // SAFETY: the scene and dummy buffers are this tracer's; the caller vouches
-        // for `rays`, `hits` and `counters`.
-        let set = unsafe { BufferSet::from_ranges(&self.ctx, k, &ranges)? };
+        let capacity = capacity.min(u32::MAX as u64) as u32;
+        let careful = match k.careful {
+            Some(_) => {
+                let bytes = (CAREFUL_HEADER_WORDS as u64 + capacity as u64) * 4;
+                let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+                    | vk::BufferUsageFlags::INDIRECT_BUFFER
+                    | vk::BufferUsageFlags::TRANSFER_DST;
+                let list = Buffer::new(&self.ctx, bytes, usage, MemoryLocation::GpuOnly, "careful-pass list")?;
+                check_range(&self.ctx, "careful-pass list", &BufferRange::whole(&list))?;
+                ranges[BINDING_CAREFUL as usize] = BufferRange::whole(&list);
+                Some(list)
+            }
+            None => None,
+        };
+        // SAFETY: the scene, dummy and list buffers are this tracer's; the caller
+        // vouches for `rays`, `hits` and `counters`.
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, &k.main, &ranges)? };
         Ok(TraceBinding {
             set,
+            careful,
             kernel,
-            pipeline: k.pipeline,
+            pipeline: k.main.pipeline,
             generation: self.generation,
-            capacity: capacity.min(u32::MAX as u64) as u32,
+            capacity,
             options: *options,
         })
     }
 
     /// The kernel of `binding`, after checking it belongs to this tracer's current
     /// scene and holds `count` rays.
-    fn check_binding(&self, binding: &TraceBinding, count: u32) -> Result<&Kernel> {
+    fn check_binding(&self, binding: &TraceBinding, count: u32) -> Result<&TraceKernels> {
         let kernel = match self.kernels.get(binding.kernel) {
-            Some((_, k)) if k.pipeline == binding.pipeline => k,
+            Some((_, k)) if k.main.pipeline == binding.pipeline => k,
             _ => return Err(Error::InvalidInput("the binding was made by another tracer".into())),
         };
         if binding.generation != self.generation {
@@ -555,11 +610,19 @@ impl Tracer {
         Ok(kernel)
     }
 
-    /// Records the dispatch of a checked binding.
+    /// Records the dispatches of a checked binding: one, or for robust single rays
+    /// the fast pass and the careful pass over the rays it listed, with the
+    /// barriers between them.
     ///
     /// # Safety
-    /// `cmd` is recording; `kernel` and `binding` passed `check_binding` for `count`.
-    unsafe fn record_unchecked(&self, cmd: vk::CommandBuffer, kernel: &Kernel, binding: &TraceBinding, count: u32) {
+    /// `cmd` is recording; `kernels` and `binding` passed `check_binding` for `count`.
+    unsafe fn record_unchecked(
+        &self,
+        cmd: vk::CommandBuffer,
+        kernels: &TraceKernels,
+        binding: &TraceBinding,
+        count: u32,
+    ) {
         let b = self.scene.bounds;
         let params = TraceParams {
             scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
@@ -567,8 +630,49 @@ impl Tracer {
             ray_count: count,
             pad: [0; 3],
         };
-        // SAFETY: forwarded from the caller.
-        unsafe { kernel.record_dispatch(cmd, binding.set.set, bytemuck::bytes_of(&params), count) };
+        let push = bytemuck::bytes_of(&params);
+        let device = &self.ctx.device;
+        let barrier = |src_stage, src_access, dst_stage, dst_access| {
+            let barrier = vk::MemoryBarrier::default().src_access_mask(src_access).dst_access_mask(dst_access);
+            // SAFETY: `cmd` is recording (the caller's contract).
+            unsafe {
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    src_stage,
+                    dst_stage,
+                    vk::DependencyFlags::empty(),
+                    &[barrier],
+                    &[],
+                    &[],
+                )
+            };
+        };
+        // SAFETY: forwarded from the caller; the list buffer lives in the binding.
+        unsafe {
+            let (Some(careful), Some(list)) = (&kernels.careful, &binding.careful) else {
+                kernels.main.record_dispatch(cmd, binding.set.set, push, count);
+                return;
+            };
+            // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
+            // recording's careful pass has read it.
+            let stage = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT;
+            barrier(stage, vk::AccessFlags::empty(), vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::empty());
+            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&[0u32, 1, 1, 0]));
+            barrier(
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            );
+            kernels.main.record_dispatch(cmd, binding.set.set, push, count);
+            barrier(
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_WRITE,
+                stage,
+                vk::AccessFlags::INDIRECT_COMMAND_READ | vk::AccessFlags::SHADER_READ,
+            );
+            careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0);
+        }
     }
 
     /// Records the trace of the first `count` rays of `binding`'s ray range into

@@ -216,28 +216,24 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise float bz = r.sz * b[r.kz];
     precise float cz = r.sz * c[r.kz];
     precise float t_scaled = u * az + v * bz + w * cz;
-    // A hit within rounding of tmin or tmax (a ray leaving a surface, a shadow ray
-    // ending on a vertex): decide in f64 which side of the bound it lies on.
-    precise float t_err = EDGE_GAMMA * (abs(u * az) + abs(v * bz) + abs(w * cz));
-    // The edge functions' errors du_i move t_scaled - b det by sum du_i (z_i - b).
-    precise float at_tmin = t_scaled - tmin * det;
-    precise float at_tmax = t_scaled - r.ray_tmax * det;
-    precise float weights_err = eu + ev + ew;
-    precise float dev_tmin = max(max(abs(az - tmin), abs(bz - tmin)), abs(cz - tmin));
-    precise float dev_tmax = max(max(abs(az - r.ray_tmax), abs(bz - r.ray_tmax)), abs(cz - r.ray_tmax));
-    bool near_tmin = !isinf(tmin) && abs(at_tmin) <= t_err + weights_err * dev_tmin + EDGE_GAMMA * abs(tmin * det);
-    bool near_tmax = !isinf(r.ray_tmax)
-        && abs(at_tmax) <= t_err + weights_err * dev_tmax + EDGE_GAMMA * abs(r.ray_tmax * det);
-    if (ROBUST && (near_tmin || near_tmax)) return TRI_UNSURE;
     precise float rcp_det = 1.0 / det;
     precise float t = t_scaled * rcp_det;
     precise float e = 0.0;
     if (ROBUST) {
-        // t - exact t = (sum of du_i (z_i - t) + rounding of t_scaled - t * rounding of
-        // det) / det, and |z_i - t| is at most the spread of the z_i (t is their
-        // weighted mean).
+        // A bound on |t - exact t|: the edge functions' errors du_i move t_scaled -
+        // t det by sum du_i (z_i - t), and |z_i - t| is at most the spread of the z_i
+        // (t is their weighted mean); then the roundings of t_scaled, det and t.
+        precise float t_err = EDGE_GAMMA * (abs(u * az) + abs(v * bz) + abs(w * cz));
+        precise float weights_err = eu + ev + ew;
         precise float spread = max(max(az, bz), cz) - min(min(az, bz), cz);
         e = (t_err + weights_err * spread + EDGE_GAMMA * abs(t_scaled)) / abs(det) + EDGE_GAMMA * abs(t);
+        // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
+        // surface, a shadow ray ending on a vertex): decide in f64 which side of the
+        // bound it lies on. |t - b| is exact near b (Sterbenz) and far from it it
+        // exceeds e by far, so the f32 difference decides soundly.
+        bool near_tmin = !isinf(tmin) && abs(t - tmin) <= e;
+        bool near_tmax = !isinf(r.ray_tmax) && abs(t - r.ray_tmax) <= e;
+        if (near_tmin || near_tmax) return TRI_UNSURE;
     }
     bool below = t <= tmax || (ROBUST && t - e <= tmax && t <= r.ray_tmax);
     if (!(t >= tmin && below)) return TRI_MISS;

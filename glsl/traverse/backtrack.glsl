@@ -88,7 +88,14 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
-    if (fallback) return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);
+    if (fallback) {
+        // The fast pass leaves the exact restarts to the careful one (see careful_pass).
+        if (!careful_pass) {
+            needs_careful = true;
+            return true;
+        }
+        return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);
+    }
     return false;
 }
 

@@ -219,17 +219,19 @@ uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
     return a.w;
 }
 
-// Robust single rays are traced twice at most (trace.comp): a fast trace whose
-// leaves skip the f64 pass below and only note that a pair needed it, then, for
-// the rays so noted, a careful trace with it (packets trace carefully at once).
-// The pass is rarely needed (1 leaf in 4000 on random rays), but lavapipe runs a
-// loop's or branch's body under a mask even when no lane enters it, so in every
-// leaf it cost 44 % of robust `stack`'s shader instructions (bunny, random rays).
-// Both traces are inlined copies of one traversal, and careful_pass is a
-// constant in each after inlining, so the fast copy holds no f64 pass. The
-// careful trace decides everything the fast one decided the same way, so hits
-// and counters are those of a single careful trace (the CPU twins').
-bool careful_pass = true;
+// Robust single rays are traced in two passes (trace.comp, src/trace.rs): a fast
+// pass whose leaves skip the f64 pass below and only note that a pair needed it
+// (and whose `backtrack` and `ropes` note where they would fall back to exact
+// restarts), then, in a second dispatch over the rays so noted, a careful trace
+// from scratch. Packets and the plain kernels trace once (careful_pass true).
+// lavapipe runs every branch of a kernel under a mask whether or not a lane takes
+// it, and a loop's body at least once, so code a kernel holds costs in every
+// subgroup: the leaf's f64 pass, needed in about 1 leaf in 4000, cost 44 % of
+// robust `stack`'s instructions in every leaf (bunny, random rays), and a careful
+// copy in the same kernel as the fast one 18 % (bunny, camera rays). The careful
+// trace decides everything the fast one decided the same way, so hits and
+// counters are those of a single careful trace (the CPU twins').
+const bool careful_pass = PASS != PASS_FAST;
 bool needs_careful = false;
 
 // The closest hit's triangle reference (an index of tri_texels; NO_REF for none)

@@ -179,11 +179,7 @@ impl Kernel {
     /// layout whose buffers stay alive until the command buffer completes.
     pub unsafe fn record_dispatch(&self, cmd: vk::CommandBuffer, set: vk::DescriptorSet, push: &[u8], threads: u32) {
         let device = &self.ctx.device;
-        device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
-        device.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[set], &[]);
-        if !push.is_empty() {
-            device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
-        }
+        self.record_bind(cmd, set, push);
         let groups = threads.div_ceil(self.workgroup_size);
         let max = self.ctx.info.max_workgroup_count_x.max(1);
         if groups <= max {
@@ -195,6 +191,37 @@ impl Kernel {
                 device.cmd_dispatch_base(cmd, base, 0, 0, count, 1, 1);
                 base += count;
             }
+        }
+    }
+
+    /// Records an indirect dispatch whose workgroup counts the GPU reads from
+    /// `args` at `offset` (`VkDispatchIndirectCommand`): binds the pipeline, `set`
+    /// as set 0 and the push constants, then dispatches.
+    ///
+    /// # Safety
+    /// As [`Kernel::record_dispatch`]; `args` must be a live buffer with
+    /// `INDIRECT_BUFFER` usage holding the three counts at `offset` when the
+    /// dispatch runs (made visible to `DRAW_INDIRECT`/`INDIRECT_COMMAND_READ`), and
+    /// each count at most the device's `maxComputeWorkGroupCount`.
+    pub unsafe fn record_dispatch_indirect(
+        &self,
+        cmd: vk::CommandBuffer,
+        set: vk::DescriptorSet,
+        push: &[u8],
+        args: vk::Buffer,
+        offset: u64,
+    ) {
+        self.record_bind(cmd, set, push);
+        self.ctx.device.cmd_dispatch_indirect(cmd, args, offset);
+    }
+
+    /// Binds the pipeline, `set` as set 0 and the push constants in `cmd`.
+    unsafe fn record_bind(&self, cmd: vk::CommandBuffer, set: vk::DescriptorSet, push: &[u8]) {
+        let device = &self.ctx.device;
+        device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, self.pipeline);
+        device.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, self.layout, 0, &[set], &[]);
+        if !push.is_empty() {
+            device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::COMPUTE, 0, push);
         }
     }
 }
