@@ -156,9 +156,15 @@ void trace_ray(uint index) {
     if (PASS == PASS_FAST && alive && needs_careful) {
         uint slot = atomicAdd(careful[3], 1u);
         careful[CAREFUL_HEADER_WORDS + slot] = index;
-        // One more workgroup for the careful pass at every TRACE_WORKGROUP_SIZE-th ray.
-        if (slot % TRACE_WORKGROUP_SIZE == 0u && slot / TRACE_WORKGROUP_SIZE < CAREFUL_MAX_GROUPS) {
-            atomicAdd(careful[0], 1u);
+        // One more workgroup for the careful pass at every TRACE_WORKGROUP_SIZE-th ray:
+        // the first CAREFUL_MAX_GROUPS in x, then one more row in y per as many.
+        if (slot % TRACE_WORKGROUP_SIZE == 0u) {
+            uint group = slot / TRACE_WORKGROUP_SIZE;
+            if (group < CAREFUL_MAX_GROUPS) {
+                atomicAdd(careful[0], 1u);
+            } else if (group % CAREFUL_MAX_GROUPS == 0u) {
+                atomicAdd(careful[1], 1u);
+            }
         }
         return;
     }
@@ -181,14 +187,15 @@ void trace_ray(uint index) {
 }
 
 void main() {
-    uint id = gl_GlobalInvocationID.x;
-    if (PASS == PASS_CAREFUL) {
-        // The listed rays; more than the dispatch covers are taken in strides.
-        uint count = careful[3];
-        for (uint k = id; k < count; k += CAREFUL_MAX_GROUPS * TRACE_WORKGROUP_SIZE) {
-            trace_ray(careful[CAREFUL_HEADER_WORDS + k]);
-        }
-    } else if (id < params.ray_count) {
-        trace_ray(id);
-    }
+    // One call site, so the kernel holds one inlined copy of the traversal (and no
+    // loop around it: lavapipe runs a loop's body under the loop's mask, which made
+    // every ray dearer). The careful pass takes the listed rays, in rows of
+    // CAREFUL_MAX_GROUPS workgroups.
+    bool listed = PASS == PASS_CAREFUL;
+    uint id = listed ? (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * TRACE_WORKGROUP_SIZE +
+                           gl_LocalInvocationID.x
+                     : gl_GlobalInvocationID.x;
+    uint count = listed ? careful[3] : params.ray_count;
+    if (id >= count) return;
+    trace_ray(listed ? careful[CAREFUL_HEADER_WORDS + id] : id);
 }

@@ -76,8 +76,8 @@ pub const BINDING_CAREFUL: u32 = 9;
 pub const TRACE_BINDINGS: u32 = 10;
 /// Words before the ray indices in the careful-pass list.
 pub const CAREFUL_HEADER_WORDS: u32 = 4;
-/// Workgroups the careful pass dispatches at most (Vulkan's guaranteed minimum of
-/// `maxComputeWorkGroupCount[0]`); more listed rays are taken in strides.
+/// Workgroups per row (x) of the careful pass's indirect dispatch: Vulkan's
+/// guaranteed minimum of `maxComputeWorkGroupCount`; more listed rays take more rows (y).
 pub const CAREFUL_MAX_GROUPS: u32 = 65535;
 
 // The passes of the trace kernel (specialization constant `PASS`).
