@@ -120,10 +120,6 @@ void trace_ray(uint index) {
     ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
     ray.tmax = uintBitsToFloat(w3.y);
 
-    // Per-ray state of common.glsl (the careful pass may trace several rays).
-    needs_careful = false;
-    best_ref = NO_REF;
-    best_err = 0.0;
     Hit best;
     best.t = ray.tmax;
     best.prim_id = PRIM_MISS;

@@ -657,7 +657,8 @@ impl Tracer {
             // recording's careful pass has read it.
             let stage = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT;
             barrier(stage, vk::AccessFlags::empty(), vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::empty());
-            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&[0u32, 1, 1, 0]));
+            let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
+            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
             barrier(
                 vk::PipelineStageFlags::TRANSFER,
                 vk::AccessFlags::TRANSFER_WRITE,

@@ -224,11 +224,11 @@ uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
 // (and whose `backtrack` and `ropes` note where they would fall back to exact
 // restarts), then, in a second dispatch over the rays so noted, a careful trace
 // from scratch. Packets and the plain kernels trace once (careful_pass true).
-// lavapipe runs every branch of a kernel under a mask whether or not a lane takes
-// it, and a loop's body at least once, so code a kernel holds costs in every
-// subgroup: the leaf's f64 pass, needed in about 1 leaf in 4000, cost 44 % of
-// robust `stack`'s instructions in every leaf (bunny, random rays), and a careful
-// copy in the same kernel as the fast one 18 % (bunny, camera rays). The careful
+// lavapipe runs every branch and loop of a kernel under a mask whether or not a
+// lane enters it, so code a kernel holds costs in every subgroup: the leaf's f64
+// pass, needed in about 1 leaf in 4000, cost 44 % of robust `stack`'s
+// instructions in every leaf (bunny, random rays), and a careful copy in the same
+// kernel as the fast one 14 % (bunny, camera rays). The careful
 // trace decides everything the fast one decided the same way, so hits and
 // counters are those of a single careful trace (the CPU twins').
 const bool careful_pass = PASS != PASS_FAST;
@@ -252,9 +252,9 @@ float best_reach(Hit best) {
 // short (see trace.comp).
 //
 // The f32 tests come first. Two kinds of pairs they cannot decide go to a
-// second pass in f64, in a loop of its own (SIMD drivers such as lavapipe
-// execute both sides of a branch under a mask, but skip a loop no lane enters,
-// so the f64 code costs nothing in a subgroup where no ray needs it):
+// second pass in f64, in a loop of its own, which only the careful pass holds
+// (lavapipe runs even a loop no lane enters under a mask, so in the fast pass
+// the leaf only notes that the ray needs the careful pass):
 // - unsure pairs (an edge function or a ray bound within rounding);
 // - with ROBUST, depth ties: a hit whose f32 t lies within rounding of the
 //   closest one's (far from the origin, surfaces a few ulps of t apart).
