@@ -37,5 +37,5 @@ void main() {
     }
     if (incomplete > 0u) atomicAdd(counters[RC_BAD_RAYS], incomplete);
     uint pixel = paths[i].pixel;
-    accum[pixel] += vec4(sum, 0.0);
+    accum[pixel] += vec4(sum, float(incomplete));  // w counts the pixel's bad rays
 }

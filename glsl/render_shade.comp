@@ -69,6 +69,7 @@ void main() {
             accum[path.pixel] += vec4(path.throughput * p.background.xyz, 0.0);
         } else {
             atomicAdd(counters[RC_BAD_RAYS], 1u);
+            accum[path.pixel] += vec4(0.0, 0.0, 0.0, 1.0);  // w counts the pixel's bad rays
         }
         return;
     }

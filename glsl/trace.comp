@@ -51,6 +51,9 @@ layout(std430, set = 0, binding = BINDING_CAREFUL) coherent buffer Careful { uin
 
 layout(push_constant) uniform Push { TraceParams params; };
 
+const float FLT_MIN_NORMAL = 1.17549435e-38;
+const float FLT_MAX = 3.40282347e38;
+
 #include "common.glsl"
 #include "stack.glsl"
 #include "restart.glsl"
@@ -62,13 +65,50 @@ layout(push_constant) uniform Push { TraceParams params; };
 #include "packet_stack.glsl"
 #include "packet_short_stack.glsl"
 
-const float FLT_MIN_NORMAL = 1.17549435e-38;
-const float FLT_MAX = 3.40282347e38;
 
 bool ray_is_valid(Ray ray) {
     bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
     bool dir_ok = !any(isnan(ray.dir)) && any(notEqual(ray.dir, vec3(0.0)));
     return origin_ok && dir_ok && !isnan(ray.tmin) && !isnan(ray.tmax);
+}
+
+// Robust rays from far away (more than SHIFT_DIAGONALS scene diagonals before
+// the box): move the segment frame's origin to the box entry t0 (in f64, kept as
+// two f32) and clip again there, widened by t_err, a bound on the error of any
+// plane distance computed as plane_t does from that origin:
+// - hi = f32(p), lo = f32(p - hi) with p = o + t0 * d in f64: |p - exact| is at
+//   most 2^-52 (|o| + |t0 d|), |hi + lo - p| at most 2^-46 |hi|;
+// - (plane - hi) - lo in f32 adds 2^-24 relative (covered by T_EPS) and 2^-47 |hi|.
+// Doubled, divided by |d| per axis, the largest over the axes the ray moves on.
+// Returns false when the ray misses the box after all.
+bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
+    vec3 bmin = params.scene_min.xyz;
+    vec3 bmax = params.scene_max.xyz;
+    // Squared lengths (no sqrt, whose rounding GPUs do not fix).
+    precise vec3 ext = bmax - bmin;
+    precise float diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
+    vec3 ad = abs(r.dir);
+    precise float dist = t0 * max(ad.x, max(ad.y, ad.z));
+    precise float far2 = float(SHIFT_DIAGONALS * SHIFT_DIAGONALS) * diag2;
+    if (!(t0 > 0.0 && dist * dist > far2)) return true;
+    dvec3 o = dvec3(r.origin);
+    dvec3 d = dvec3(r.dir);
+    double t_shift = double(t0);
+    precise dvec3 p = o + t_shift * d;
+    vec3 hi = vec3(p);
+    precise dvec3 rest = p - dvec3(hi);
+    vec3 lo = vec3(rest);
+    precise dvec3 a = abs(dvec3(hi)) * double(1.0 / 35184372088832.0)   // 2^-45
+                      + (abs(o) + abs(t_shift * d)) * double(1.0 / 1125899906842624.0);  // 2^-50
+    double e = 0.0LF;
+    for (uint axis = 0u; axis < 3u; ++axis) {
+        if (r.dir[axis] != 0.0) e = max(e, a[axis] / abs(d[axis]));
+    }
+    r.t_err = max(float(e * 1.0000010000000000LF), FLT_MIN_NORMAL);
+    r.origin = hi;
+    r.origin_lo = lo;
+    r.t_shift = t0;
+    return clip_to_box(r, bmin, bmax, t0, t1);
 }
 
 // Runs the variant on one ray (every lane enters for packets: their decisions
@@ -139,10 +179,14 @@ void trace_ray(uint index) {
     r.inv_dir = clamp(1.0 / ray.dir, vec3(-FLT_MAX), vec3(FLT_MAX));
     r.tmin = ray.tmin;
     r.tmax = ray.tmax;
+    r.origin_lo = vec3(0.0);
+    r.t_shift = 0.0;
+    r.t_err = 0.0;
     r.wr = watertight_ray(ray.origin, ray.dir);
     r.wr.ray_tmax = ray.tmax;
     float t0 = 0.0, t1 = 0.0;
     bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
+    if (ROBUST && alive) alive = shift_to_scene(r, t0, t1);
     if (!valid) best.prim_id = PRIM_INVALID;
     // Robust single rays trace fast first, then carefully in a second dispatch when
     // the fast trace met what it could not decide in f32 (see careful_pass in

@@ -20,6 +20,11 @@ pub const EDGE_GAMMA_LOG2: u32 = 19;
 /// two ray/plane distances), so that rounding never skips a cell the ray enters
 /// (conservative traversal in the spirit of Ize 2013).
 pub const TRAVERSAL_EPS_LOG2: u32 = 20;
+/// Robust rays whose origin lies more than this many scene diagonals before
+/// their entry into the scene box are traversed from that entry (the segment
+/// frame of common.glsl), so that the widening above stays a fraction of the
+/// scene, not of a huge `t`. Nearer rays are traversed from their own origin.
+pub const SHIFT_DIAGONALS: u32 = 16;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;
 /// `ropes` entry of a face on the scene boundary.
@@ -113,6 +118,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAX_SHORT_STACK", MAX_SHORT_STACK),
     ("EDGE_GAMMA_LOG2", EDGE_GAMMA_LOG2),
     ("TRAVERSAL_EPS_LOG2", TRAVERSAL_EPS_LOG2),
+    ("SHIFT_DIAGONALS", SHIFT_DIAGONALS),
     ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),

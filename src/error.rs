@@ -58,23 +58,6 @@ pub enum Error {
     /// Bad input to a library call (empty scene, bad option, malformed ray file, ...).
     #[error("{0}")]
     InvalidInput(String),
-
-    /// Rays of a render were invalid (e.g. a NaN direction from degenerate
-    /// geometry) or did not finish traversal; the image would be wrong.
-    #[error("{0} ray(s) of the render were invalid or did not finish traversal")]
-    RenderRays(u64),
-
-    /// Some rays did not finish traversal (step cap or a driver loop cut-off);
-    /// their hits would be wrong, so they are reported instead of returned.
-    #[error("{count} ray(s) did not finish traversal (first: ray {first}); the step cap is {cap}")]
-    Incomplete {
-        /// Number of rays that did not finish.
-        count: usize,
-        /// Index of the first such ray in the batch.
-        first: usize,
-        /// The traversal step cap ([`crate::consts::MAX_TRAVERSAL_STEPS`]).
-        cap: u32,
-    },
 }
 
 /// The library's result type.

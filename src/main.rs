@@ -551,6 +551,13 @@ fn render(args: RenderArgs) -> Result<()> {
         compare_renders(&ctx, &tree, &scene, &settings, &out, render_once)?;
     }
 
+    let mut out = out;
+    if args.explain {
+        // A debug colour for pixels that lost a ray (invalid or unfinished).
+        for &p in &out.bad_pixels {
+            out.pixels[p] = BAD_PIXEL;
+        }
+    }
     save(&out.pixels)?;
     if let Some(exr) = &args.exr {
         kdtrace::render::save_exr(exr, &out.pixels, out.width, out.height)?;
@@ -588,6 +595,14 @@ fn render(args: RenderArgs) -> Result<()> {
         s.render_seconds * 1e3,
         s.submits
     );
+    if s.bad_rays > 0 {
+        let what = format!(
+            "ray(s) of the render (invalid or unfinished; {} pixel(s) lack their light{})",
+            out.bad_pixels.len(),
+            if args.explain { ", painted magenta by --explain" } else { "; --explain paints them magenta" }
+        );
+        return Err(Unfinished::incomplete(s.bad_rays as usize, &what).into());
+    }
     Ok(())
 }
 
@@ -750,7 +765,10 @@ fn trace(args: TraceArgs) -> Result<()> {
         ),
         _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", variant.name(), wall * 1e3),
     }
-    Ok(())
+    match Unfinished::from_hits(&result.hits) {
+        Some(u) => Err(u.into()),
+        None => Ok(()),
+    }
 }
 
 fn write_counters_csv(path: &Path, counters: &[Counters]) -> Result<()> {
@@ -894,6 +912,12 @@ fn bench(args: BenchArgs) -> Result<()> {
         args.csv.display(),
         plots.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
     );
+    let incomplete: usize = cells.iter().map(|c| c.incomplete).sum();
+    if incomplete > 0 {
+        let what =
+            format!("rays in {} cell(s) (column 'incomplete')", cells.iter().filter(|c| c.incomplete > 0).count());
+        return Err(Unfinished::incomplete(incomplete, &what).into());
+    }
     Ok(())
 }
 
@@ -1127,12 +1151,18 @@ fn verify(args: VerifyArgs) -> Result<()> {
         if args.any_hit { "any-hit" } else { "closest hit" },
         device
     );
-    println!("{}", table_header());
-    let (mut total, mut serious) = (0usize, 0usize);
+    // The agreement table with each category's node visits per ray (p50, p99).
+    let header = table_header();
+    let (head, rule) = header.split_once('\n').unwrap_or((&header, ""));
+    println!("{head} p50 nodes | p99 nodes |\n{rule}---|---|");
+    let (mut total, mut serious, mut incomplete) = (0usize, 0usize, 0usize);
     let mut examples = Vec::new();
     for (label, rays) in &batches {
-        let hits = match tracer.as_mut() {
-            Some((tracer, _)) => tracer.trace(rays, &TraceOptions { traversal, counters: false })?.hits,
+        let (hits, counters): (Vec<kdtrace::Hit>, Vec<Counters>) = match tracer.as_mut() {
+            Some((tracer, _)) => {
+                let result = tracer.trace(rays, &TraceOptions { traversal, counters: true })?;
+                (result.hits, result.counters.context("the tracer returned no counters")?)
+            }
             None => {
                 let scene_ref = kdtrace::kdtree::traverse::SceneRef::new(&tree, &scene.triangles);
                 let links = traversal
@@ -1143,19 +1173,23 @@ fn verify(args: VerifyArgs) -> Result<()> {
                     Some(l) => scene_ref.with_links(l),
                     None => scene_ref,
                 };
-                rays.iter().map(|r| kdtrace::kdtree::traverse::trace_ray(&scene_ref, r, traversal).0).collect()
+                rays.iter().map(|r| kdtrace::kdtree::traverse::trace_ray(&scene_ref, r, traversal)).unzip()
             }
         };
         let tally = judge_batch(&scene.triangles, rays, &hits, args.any_hit);
-        println!("{}", table_row(label, &tally));
+        let mut nodes: Vec<u32> = counters.iter().map(|c| c.nodes).collect();
+        nodes.sort_unstable();
+        let quantile = |q: f64| nodes.get(((nodes.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0);
+        println!("{} {} | {} |", table_row(label, &tally), quantile(0.5), quantile(0.99));
         total += tally.rays;
         serious += tally.serious();
+        incomplete += tally.incomplete;
         examples.extend(tally.serious_examples.iter().take(args.show).map(|e| (label.clone(), *e)));
         if args.show_all {
             examples.extend(tally.other_examples.iter().take(args.show).map(|e| (label.clone(), *e)));
         }
     }
-    println!("\n{total} rays, {serious} serious errors");
+    println!("\n{total} rays, {serious} serious errors, {incomplete} incomplete");
     for (label, (ray, hit, verdict)) in examples {
         println!("- {label}: {} ray {ray:?} -> {hit:?}", verdict.name());
         // What the exact reference says, and where the tracer's triangle lies exactly.
@@ -1169,8 +1203,62 @@ fn verify(args: VerifyArgs) -> Result<()> {
         };
         println!("    exact: {exact}; the tracer's triangle is {own}");
     }
+    if incomplete > 0 {
+        return Err(Unfinished::incomplete(incomplete, "rays").into());
+    }
+    if serious > 0 {
+        return Err(Unfinished { code: EXIT_SERIOUS, message: format!("{serious} serious error(s)") }.into());
+    }
     Ok(())
 }
+
+/// `render --explain`'s colour for pixels that lost a ray: magenta, bright enough
+/// to survive tone mapping.
+const BAD_PIXEL: Vec3 = Vec3::new(1e3, 0.0, 1e3);
+
+/// Exit status of `trace`, `verify`, `bench` and `render` when some rays did not
+/// finish traversal (their answers are marked PRIM_INCOMPLETE; the rest is written).
+const EXIT_INCOMPLETE: u8 = 3;
+/// Exit status of `verify` when it found a serious error (and every ray finished).
+const EXIT_SERIOUS: u8 = 4;
+
+/// A command that did its work but must exit non-zero (EXIT_INCOMPLETE, EXIT_SERIOUS).
+#[derive(Debug)]
+struct Unfinished {
+    code: u8,
+    message: String,
+}
+
+impl Unfinished {
+    fn incomplete(count: usize, what: &str) -> Self {
+        Unfinished {
+            code: EXIT_INCOMPLETE,
+            message: format!(
+                "{count} {what} did not finish traversal (the step cap is {}); they are marked PRIM_INCOMPLETE",
+                kdtrace::consts::MAX_TRAVERSAL_STEPS
+            ),
+        }
+    }
+
+    /// `incomplete` for the hits of a batch: how many and the first indices.
+    fn from_hits(hits: &[kdtrace::Hit]) -> Option<Self> {
+        let rays = kdtrace::trace::incomplete_rays(hits);
+        if rays.is_empty() {
+            return None;
+        }
+        let first: Vec<String> = rays.iter().take(10).map(|i| i.to_string()).collect();
+        let more = if rays.len() > 10 { ", ..." } else { "" };
+        Some(Unfinished::incomplete(rays.len(), &format!("ray(s) (first: {}{more})", first.join(", "))))
+    }
+}
+
+impl std::fmt::Display for Unfinished {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Unfinished {}
 
 fn info() -> Result<()> {
     let devices = list_devices()?;
@@ -1191,9 +1279,9 @@ fn info() -> Result<()> {
     Ok(())
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.command {
+    let result = match cli.command {
         Command::Render(a) => render(a),
         Command::Trace(a) => trace(a),
         Command::Stats(a) => stats(a),
@@ -1202,5 +1290,18 @@ fn main() -> Result<()> {
         Command::Subgroups(a) => subgroups(a),
         Command::Verify(a) => verify(a),
         Command::Info => info(),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => match e.downcast_ref::<Unfinished>() {
+            Some(u) => {
+                eprintln!("kdtrace: {u}");
+                std::process::ExitCode::from(u.code)
+            }
+            None => {
+                eprintln!("Error: {e:?}");
+                std::process::ExitCode::FAILURE
+            }
+        },
     }
 }

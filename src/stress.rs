@@ -43,15 +43,22 @@ pub enum Category {
     AxisPlane,
     /// Rays leaving a point on a triangle (`tmin = 0`), either side.
     OnSurface,
-    /// Origins 1e5 scene sizes away, aimed at points on triangles.
+    /// Origins 1e5 scene diagonals away, aimed at points on triangles.
     FarOrigin,
     /// Rays toward points on triangles with direction lengths 1e-15 … 1e15.
     DirectionScale,
+    /// Origins 1e3 scene diagonals away, aimed at points on triangles.
+    FarOrigin1e3,
+    /// Origins 1e7 scene diagonals away, aimed at points on triangles.
+    FarOrigin1e7,
+    /// Huge finite `tmax` (1e30 or `f32::MAX`) toward points on triangles, from
+    /// points in the box or 1e5 diagonals away.
+    HugeTmax,
 }
 
 impl Category {
     /// Every category, in table order.
-    pub const ALL: [Category; 12] = [
+    pub const ALL: [Category; 15] = [
         Category::Random,
         Category::AxisParallel,
         Category::SplitPlaneOrigin,
@@ -62,7 +69,10 @@ impl Category {
         Category::InTrianglePlane,
         Category::AxisPlane,
         Category::OnSurface,
+        Category::FarOrigin1e3,
         Category::FarOrigin,
+        Category::FarOrigin1e7,
+        Category::HugeTmax,
         Category::DirectionScale,
     ];
 
@@ -79,7 +89,10 @@ impl Category {
             Category::InTrianglePlane => "in triangle plane",
             Category::AxisPlane => "in axis plane",
             Category::OnSurface => "on surface",
-            Category::FarOrigin => "far origin",
+            Category::FarOrigin1e3 => "far origin 1e3",
+            Category::FarOrigin => "far origin 1e5",
+            Category::FarOrigin1e7 => "far origin 1e7",
+            Category::HugeTmax => "huge tmax",
             Category::DirectionScale => "direction scale",
         }
     }
@@ -148,6 +161,7 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
     }
     let bounds = tree.bounds;
     let size = bounds.extent().max_element().max(f32::MIN_POSITIVE);
+    let diagonal = bounds.extent().length().max(f32::MIN_POSITIVE);
     let mut s = Source { triangles, live, bounds, size, rng: SplitMix64(seed ^ (category as u64) << 32) };
     let mut splits = Vec::new();
     if category == Category::SplitPlaneOrigin {
@@ -254,9 +268,22 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                 let origin = s.surface_point();
                 Ray::new(origin, s.rng.unit_vector(), 0.0, f32::INFINITY)
             }
-            Category::FarOrigin => {
-                let origin = bounds.center() + s.rng.unit_vector() * (1e5 * s.size);
+            Category::FarOrigin1e3 | Category::FarOrigin | Category::FarOrigin1e7 => {
+                let distance = match category {
+                    Category::FarOrigin1e3 => 1e3,
+                    Category::FarOrigin => 1e5,
+                    _ => 1e7,
+                };
+                let origin = bounds.center() + s.rng.unit_vector() * (distance * diagonal);
                 toward(origin, s.surface_point())
+            }
+            Category::HugeTmax => {
+                let origin = match s.rng.next_u64() & 1 {
+                    0 => s.box_point(),
+                    _ => bounds.center() + s.rng.unit_vector() * (1e5 * diagonal),
+                };
+                let tmax = if s.rng.next_u64() & 1 == 0 { 1e30 } else { f32::MAX };
+                Ray { tmax, ..toward(origin, s.surface_point()) }
             }
             Category::DirectionScale => {
                 let origin = s.box_point();
@@ -278,6 +305,9 @@ pub struct Tally {
     /// Largest distance between the tracer's and the exact hit point among
     /// agreeing hits, relative to the magnitude of the coordinates.
     pub max_point_error: f64,
+    /// Rays the tracer marked [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE)
+    /// (also counted as bad answers).
+    pub incomplete: usize,
     /// Up to 5 seriously wrong rays, with the tracer's answer.
     pub serious_examples: Vec<(Ray, Hit, Verdict)>,
     /// Up to 5 rays that disagree without a serious error, with the tracer's answer.
@@ -341,7 +371,8 @@ pub fn judge_with(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], exacts: &
             }
         })
         .collect();
-    let mut tally = Tally { rays: rays.len(), ..Tally::default() };
+    let incomplete = hits.iter().filter(|h| h.prim_id == crate::consts::PRIM_INCOMPLETE).count();
+    let mut tally = Tally { rays: rays.len(), incomplete, ..Tally::default() };
     for (i, (v, err)) in verdicts.into_iter().enumerate() {
         tally.counts[Verdict::ALL.iter().position(|&x| x == v).expect("a verdict")] += 1;
         tally.max_point_error = tally.max_point_error.max(err);
@@ -358,8 +389,8 @@ pub fn judge_with(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], exacts: &
 pub fn table_header() -> String {
     let mut s = String::from("| category | rays | agree | ");
     s += &Verdict::ALL.map(|v| v.name()).join(" | ");
-    s += " | max point err |\n|---|---|---|";
-    s += &"---|".repeat(Verdict::ALL.len() + 1);
+    s += " | incomplete | max point err |\n|---|---|---|";
+    s += &"---|".repeat(Verdict::ALL.len() + 2);
     s
 }
 
@@ -367,10 +398,11 @@ pub fn table_header() -> String {
 pub fn table_row(label: &str, t: &Tally) -> String {
     let counts: Vec<String> = t.counts.iter().map(|n| n.to_string()).collect();
     format!(
-        "| {label} | {} | {:.2}% | {} | {:.1e} |",
+        "| {label} | {} | {:.2}% | {} | {} | {:.1e} |",
         t.rays,
         100.0 * t.agreement(),
         counts.join(" | "),
+        t.incomplete,
         t.max_point_error
     )
 }

@@ -53,7 +53,9 @@
 //!   triangle index or [`consts::PRIM_MISS`](crate::consts::PRIM_MISS),
 //!   [`consts::PRIM_INVALID`](crate::consts::PRIM_INVALID) or
 //!   [`consts::PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE) (a traversal that did not
-//!   finish: check for it; [`Tracer::trace`] turns it into `Error::Incomplete`).
+//!   finish: the step cap or a driver loop cut-off; the other rays' hits are
+//!   good). [`Tracer::trace`] returns such rays marked the same way, never fails
+//!   the batch for them: see [`TraceResult::incomplete`].
 //!
 //! # Lifetimes
 //!
@@ -87,8 +89,8 @@ use gpu_allocator::MemoryLocation;
 use crate::consts::{
     BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS,
     BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY,
-    COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
-    MAX_TRAVERSAL_STEPS, PASS_CAREFUL, PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
+    COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, PASS_CAREFUL,
+    PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -142,6 +144,21 @@ pub struct TraceResult {
     pub counters: Option<Vec<Counters>>,
     /// GPU time of the trace dispatches alone (timestamps), when the device has timestamps.
     pub gpu_seconds: Option<f64>,
+}
+
+impl TraceResult {
+    /// Indices of the rays that did not finish traversal (hit `prim_id` ==
+    /// [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE), `t` NaN): the step
+    /// cap ([`MAX_TRAVERSAL_STEPS`](crate::consts::MAX_TRAVERSAL_STEPS)) or a
+    /// driver's loop cut-off. Every other hit is a finished answer.
+    pub fn incomplete(&self) -> Vec<usize> {
+        incomplete_rays(&self.hits)
+    }
+}
+
+/// Indices of the hits marked [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE).
+pub fn incomplete_rays(hits: &[Hit]) -> Vec<usize> {
+    hits.iter().enumerate().filter(|(_, h)| h.prim_id == PRIM_INCOMPLETE).map(|(i, _)| i).collect()
 }
 
 /// Rays per dispatch. Bounded by the storage-buffer range and workgroup count limits.
@@ -737,7 +754,9 @@ impl Tracer {
     }
 
     /// Traces `rays` (any number: they go in chunks) and returns the closest hit of
-    /// each. Rays that did not finish traversal make this an `Error::Incomplete`.
+    /// each. A ray that did not finish traversal is returned marked
+    /// [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE) (see
+    /// [`TraceResult::incomplete`]); the batch never fails for it.
     /// The convenient path: kdtrace uploads the rays, submits on the context's
     /// queue, waits and reads the hits back (built on [`Tracer::bind`] and
     /// [`Tracer::record_binding`]).
@@ -778,7 +797,7 @@ impl Tracer {
             counters: options.counters.then(|| Vec::with_capacity(rays.len())),
             gpu_seconds: timestamps.as_ref().map(|_| 0.0),
         };
-        for (chunk_index, batch) in rays.chunks(chunk).enumerate() {
+        for batch in rays.chunks(chunk) {
             ray_buf.write(0, bytemuck::cast_slice(batch))?;
             let count = batch.len() as u32;
             let kernel = self.check_binding(&binding, count)?;
@@ -816,10 +835,6 @@ impl Tracer {
                 result.gpu_seconds = None;
             }
             let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * HIT_BYTES as usize)?);
-            if let Some(first) = hits.iter().position(|h| h.prim_id == PRIM_INCOMPLETE) {
-                let count = hits.iter().filter(|h| h.prim_id == PRIM_INCOMPLETE).count();
-                return Err(Error::Incomplete { count, first: chunk_index * chunk + first, cap: MAX_TRAVERSAL_STEPS });
-            }
             result.hits.extend_from_slice(hits);
             if let (Some(out), Some(counter_buf)) = (result.counters.as_mut(), &counter_buf) {
                 let raw: &[u32] = bytemuck::cast_slice(counter_buf.read(0, batch.len() * COUNTER_BYTES as usize)?);

@@ -267,3 +267,55 @@ fn render_rejects_bad_options_with_a_message() {
         assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
     }
 }
+
+/// Nothing lost (issue 17): a ray that cannot finish traversal (here a leaf of
+/// 70,000 copies of one triangle, beyond lavapipe 22.x's loop budget) is written
+/// as PRIM_INCOMPLETE with NaN t, the other rays' hits are written too, and
+/// `trace` says how many and exits with status 3. On a device without the loop
+/// cut-off both rays finish and it exits 0.
+#[test]
+fn trace_writes_every_hit_and_exits_3_when_rays_did_not_finish() {
+    use std::fmt::Write;
+    let mut obj = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 5 5 1\nv 6 5 1\nv 5 6 1\n");
+    for _ in 0..70_000 {
+        obj.push_str("f 1 2 3\n");
+    }
+    writeln!(obj, "f 4 5 6").unwrap();
+    let scene = temp("stacked.obj");
+    std::fs::write(&scene, obj).unwrap();
+    let rays = temp("stacked.rays");
+    let hits = temp("stacked.hits");
+    kdtrace::io::write_rays(
+        &rays,
+        &[
+            kdtrace::Ray::new(glam::Vec3::new(0.25, 0.25, -1.0), glam::Vec3::Z, 0.0, f32::INFINITY),
+            kdtrace::Ray::new(glam::Vec3::new(5.25, 5.25, -1.0), glam::Vec3::Z, 0.0, f32::INFINITY),
+        ],
+    )
+    .unwrap();
+    let o = kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap()]);
+    let written = kdtrace::io::read_hits(&hits).unwrap();
+    assert_eq!(written.len(), 2, "every ray gets a record: {}", stderr(&o));
+    // The lone triangle's hit is kept whatever happened to the other ray.
+    assert_eq!(written[1].prim_id, 70_000, "{}", stderr(&o));
+    assert_eq!(written[1].t, 2.0);
+    if written[0].prim_id == kdtrace::consts::PRIM_INCOMPLETE {
+        assert!(written[0].t.is_nan());
+        assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+        assert!(stderr(&o).contains("1 ray(s) (first: 0) did not finish traversal"), "{}", stderr(&o));
+    } else {
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(written[0].is_hit());
+    }
+}
+
+/// `verify` exits 0 when every answer agrees or differs harmlessly, and prints
+/// the node visits per category.
+#[test]
+fn verify_prints_node_visits_and_exits_0_when_clean() {
+    let scene = scene_path("cornell_box.obj");
+    let o = kdtrace(&["verify", scene.to_str().unwrap(), "--count", "32"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}{}", out, stderr(&o));
+    assert!(out.contains("p99 nodes") && out.contains("far origin 1e7") && out.contains("0 incomplete"), "{out}");
+}

@@ -31,12 +31,12 @@ use kdtrace::{Hit, Ray};
 
 /// Rays per category and scene.
 const RAYS: usize = 600;
-/// Lowest agreement in any category, for every variant: the goal, 99 %. The
-/// lowest measured (2026-12-02, `--nocapture`) is 99.67 % (split-plane origins on the teapot ×1e-4: hits
+/// Lowest agreement in any category, for every variant: the goal, 99.5 %. The
+/// lowest measured (`--nocapture`) is 99.67 % (split-plane origins on the teapot ×1e-4: hits
 /// 1e-15 apart in t, closer than f64 orders them).
-const CATEGORY_FLOOR: f64 = 0.99;
+const CATEGORY_FLOOR: f64 = 0.995;
 /// Lowest agreement over all categories of one scene and traversal.
-const OVERALL_FLOOR: f64 = 0.99;
+const OVERALL_FLOOR: f64 = 0.995;
 
 /// One category's rays, their exact answers and the stack's hits.
 type Batch = (Category, Vec<Ray>, Vec<Exact>, Vec<Hit>);
@@ -204,6 +204,65 @@ fn stress_scene(
 #[test]
 fn stress_shared_scenes() {
     stress_scenes(&[("cornell_box.obj", 1.0), ("teapot.obj", 1.0)]);
+}
+
+/// Deep trees of big meshes and far rays (issue 17): every category, the far
+/// origins at 1e3, 1e5 and 1e7 scene diagonals and huge finite `tmax` included,
+/// on the shared meshes with the deepest trees, sampled (the exact reference is
+/// brute force), through every variant and packet kernel on the GPU, closest
+/// hit and any-hit. Asserted: no incomplete ray, no serious error, agreement of
+/// at least `CATEGORY_FLOOR` in every category. Under CI a missing scene fails.
+#[test]
+fn stress_deep_trees_and_far_rays() {
+    let ctx = context();
+    let mut tracer = None;
+    let mut failures = Vec::new();
+    for (name, rays_per_category) in [("bunny.obj", 48), ("q3_20kdm2.obj", 48), ("dragon_200k.obj", 24)] {
+        if !scene_path(name).exists() {
+            assert!(std::env::var_os("CI").is_none(), "{name} is missing (tools/fetch-scenes)");
+            eprintln!("skipping {name}: not in scenes/ (tools/fetch-scenes)");
+            continue;
+        }
+        let (scene, tree, _) = scaled_scene(name, 1.0);
+        let triangles = &scene.triangles;
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
+        let batches: Vec<(Category, Vec<Ray>, Vec<Exact>)> = Category::ALL
+            .iter()
+            .map(|&c| (c, stress_rays(c, triangles, &tree, rays_per_category, 11)))
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(c, rays)| {
+                let exacts = exact_answers(triangles, &rays);
+                (c, rays, exacts)
+            })
+            .collect();
+        for traversal in traversals() {
+            for any_hit in [false, true] {
+                let traversal = Traversal { any_hit, ..traversal };
+                let label = format!("{name} {}{}", describe(&traversal), if any_hit { " any-hit" } else { "" });
+                println!("\n{label}\n{}", table_header());
+                for (category, rays, exacts) in &batches {
+                    let hits = tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+                    let t = judge_with(triangles, rays, &hits, exacts, any_hit);
+                    println!("{}", table_row(category.name(), &t));
+                    if t.incomplete > 0 || t.serious() > 0 {
+                        failures.push(format!(
+                            "{label} / {}: {} incomplete, {} serious: {:?}",
+                            category.name(),
+                            t.incomplete,
+                            t.serious(),
+                            t.serious_examples
+                        ));
+                    }
+                    if !any_hit && t.agreement() < CATEGORY_FLOOR {
+                        failures.push(format!("{label} / {}: agreement {:.4}", category.name(), t.agreement()));
+                    }
+                }
+            }
+        }
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }
 
 #[test]

@@ -30,7 +30,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
-            if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
+            if (ROBUST && ambiguous_decision(r, visit, n, ts, t0, crossed)) {
                 fallback = true;
                 break;
             }
@@ -57,7 +57,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             uint leaf_face;
             float t_next;
             float leaf_exit = box_exit(r, node, leaf_face, t_next);
-            if (near_t0(t_next, leaf_exit)) {
+            if (near_t0(r, t_next, leaf_exit)) {
                 t0 = t1;
                 fallback = true;
                 break;
@@ -75,7 +75,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             c.nodes += 1u;
             float t_next;
             exit_t = box_exit(r, node, face, t_next);
-            if (ROBUST && near_t0(exit_t, t0) && any(notEqual(box_face_plane(node, face), crossed))) ambiguous = true;
+            if (ROBUST && near_t0(r, exit_t, t0) && any(notEqual(box_face_plane(node, face), crossed))) ambiguous = true;
         }
         if (exit_t <= t0 && node != 0u && depth < MAX_STACK) return false;  // climb cut short
         if (ambiguous) {
@@ -83,7 +83,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             break;
         }
         if (exit_t <= t0) return true;  // the root's box ends here: nothing left
-        t1 = min(min(exit_t, t1_scene), best_reach(best));
+        t1 = min(min(exit_t, t1_scene), reach_t(r, best));
         t1_plane = t1 == exit_t ? box_face_plane(node, face) : NO_PLANE;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;

@@ -5,14 +5,37 @@
 #ifndef TRAVERSE_COMMON_GLSL
 #define TRAVERSE_COMMON_GLSL
 
+// Traversal runs in the ray's *segment frame*: t values measured from
+// origin + t_shift * dir, where t_shift is 0 except for robust rays whose origin
+// lies far outside the scene box (see shift_to_scene in trace.comp). There the
+// origin is moved to the box entry, kept as origin + origin_lo (two f32, from
+// f64), so that split decisions carry an error bound in scene space (t_err)
+// instead of one relative to a huge t. Hits (best.t, tmin, tmax, the triangle
+// tests) stay in the ray's own parameter; reach_t converts.
 struct TraceRay {
     WatertightRay wr;
-    vec3 origin;
+    vec3 origin;     // segment frame origin (the ray's origin when t_shift is 0)
+    vec3 origin_lo;  // the rest of the moved origin (0 when t_shift is 0)
     vec3 dir;
     vec3 inv_dir;
     float tmin;   // the ray's own bounds: a hit must lie in [tmin, tmax]
     float tmax;
+    float t_shift;  // segment t = ray t - t_shift
+    float t_err;    // absolute error bound of a segment-frame plane distance
 };
+
+// Distance (segment frame) along the ray to the plane `axis` = `plane`. Exact
+// arithmetic with origin_lo = 0 is today's (plane - origin) * inv_dir, bit for bit.
+float plane_t(TraceRay r, uint axis, float plane) {
+    precise float shifted = (plane - r.origin[axis]) - r.origin_lo[axis];
+    precise float t = (ROBUST ? shifted : plane - r.origin[axis]) * r.inv_dir[axis];
+    return t;
+}
+
+// t_err where it applies (robust kernels only; 0 when not shifted).
+float seg_err(TraceRay r) {
+    return ROBUST ? r.t_err : 0.0;
+}
 
 // Per-ray counters (kept even when COUNTERS is off; the compiler drops dead stores).
 struct TraceCounters {
@@ -40,19 +63,22 @@ uvec2 fetch_node(uint node, inout TraceCounters c) {
 // component constrains nothing unless the origin lies outside that slab.
 // The far bound is widened by 1 + 2*gamma(3) (Ize 2013) so rounding never
 // clips away a hit on the box boundary.
+// In the segment frame, the bounds widen by t_err too (0 unless shifted).
 bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
-    t0 = r.tmin;
-    t1 = r.tmax;
+    precise float tmin_seg = r.tmin - r.t_shift;
+    precise float tmax_seg = r.tmax - r.t_shift;
+    t0 = ROBUST ? tmin_seg : r.tmin;
+    t1 = ROBUST ? tmax_seg : r.tmax;
     for (uint axis = 0u; axis < 3u; ++axis) {
         float o = r.origin[axis];
         if (r.dir[axis] == 0.0) {
             if (o < bmin[axis] || o > bmax[axis]) return false;
             continue;
         }
-        precise float ta = (bmin[axis] - o) * r.inv_dir[axis];
-        precise float tb = (bmax[axis] - o) * r.inv_dir[axis];
-        float tnear = min(ta, tb);
-        precise float tfar = max(ta, tb) * 1.0000003576278687;
+        float ta = plane_t(r, axis, bmin[axis]);
+        float tb = plane_t(r, axis, bmax[axis]);
+        precise float tnear = min(ta, tb) - seg_err(r);
+        precise float tfar = max(ta, tb) * 1.0000003576278687 + seg_err(r);
         t0 = max(t0, tnear);
         t1 = min(t1, tfar);
     }
@@ -107,18 +133,19 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     near = below_first ? below : above;
     far = below_first ? above : below;
     // Clamped finite, so that the widening below never computes inf - inf.
-    precise float ts = clamp((split - o) * r.inv_dir[axis], -3.40282347e38, 3.40282347e38);
+    precise float ts = clamp(plane_t(r, axis, split), -3.40282347e38, 3.40282347e38);
     t_split = ts;
     if (d == 0.0 && o == split) return VISIT_BOTH_SAME;
     // Conservative: one child only when the plane lies beyond the segment by more
     // than rounding (Ize 2013 in spirit). After a restart (t0 = a leaf exit) the
     // near side of a plane is skipped when the plane lies before t0, or at t0 and
     // it is the plane the last leaf was left through.
+    // The bound is relative to |t| plus, in a shifted segment frame, t_err.
     float eps = ROBUST ? T_EPS : 0.0;
-    precise float ts_lo = ts - eps * abs(ts);
-    precise float ts_hi = ts + eps * abs(ts);
-    precise float t1_hi = t1 + eps * abs(t1);
-    precise float t0_lo = t0 - eps * abs(t0);
+    precise float ts_lo = ts - eps * abs(ts) - seg_err(r);
+    precise float ts_hi = ts + eps * abs(ts) + seg_err(r);
+    precise float t1_hi = t1 + eps * abs(t1) + seg_err(r);
+    precise float t0_lo = t0 - eps * abs(t0) - seg_err(r);
     if (ts_lo > t1_hi) return VISIT_NEAR;
     bool far_only;
     if (exit_plane.x == NO_PLANE.x) {
@@ -247,6 +274,12 @@ float best_reach(Hit best) {
     return ROBUST ? best.t + best_err : best.t;
 }
 
+// best_reach in the segment frame (traversal t values).
+float reach_t(TraceRay r, Hit best) {
+    precise float t = best_reach(best) - r.t_shift;
+    return ROBUST ? t : best_reach(best);
+}
+
 // Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t);
 // any-hit mode stops at the first hit. Returns false when the driver cut a loop
 // short (see trace.comp).
@@ -360,7 +393,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
 uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounters c) {
     c.leaves += 1u;
     if (!intersect_leaf(r, n, best, c)) return LEAF_CUT;
-    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
+    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : reach_t(r, best) <= t1;
     return done ? LEAF_DONE : LEAF_GO_ON;
 }
 
@@ -377,7 +410,7 @@ float box_exit(TraceRay r, uint node, out uint face, out float t_next) {
         if (d == 0.0) continue;
         bool positive = d > 0.0;
         float plane = node_boxes[node * 6u + axis + (positive ? 3u : 0u)];
-        precise float t = (plane - r.origin[axis]) * r.inv_dir[axis];
+        float t = plane_t(r, axis, plane);
         if (t < t_exit) {
             t_next = t_exit;
             t_exit = t;
@@ -400,17 +433,18 @@ uvec2 box_face_plane(uint node, uint face) {
 // check for that (a plane other than the one just crossed, or a second exit
 // face, within the widening of t0) and then finish with exact restarts from
 // there (trace_restart_exact with t_from, and push-down), which are watertight.
-bool near_t0(float ts, float t0) {
+bool near_t0(TraceRay r, float ts, float t0) {
     precise float d = abs(ts - t0);
-    return d <= T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38);
+    precise float bound = T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38) + seg_err(r);
+    return d <= bound;
 }
 
 // True when a decision at node `n` needs the exact fallback: a ray inside the
 // split plane, or a plane within rounding of t0 that is not `crossed`.
-bool ambiguous_decision(uint visit, uvec2 n, float ts, float t0, uvec2 crossed) {
+bool ambiguous_decision(TraceRay r, uint visit, uvec2 n, float ts, float t0, uvec2 crossed) {
     if (visit == VISIT_BOTH_SAME) return true;
     if (visit == VISIT_NEAR) return false;
-    return near_t0(ts, t0) && any(notEqual(node_plane(n), crossed));
+    return near_t0(r, ts, t0) && any(notEqual(node_plane(n), crossed));
 }
 
 #endif

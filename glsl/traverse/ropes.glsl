@@ -30,7 +30,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
             uint near, far;
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
-            if (ROBUST && ambiguous_decision(visit, n, ts, t0, crossed)) {
+            if (ROBUST && ambiguous_decision(r, visit, n, ts, t0, crossed)) {
                 fallback = true;
                 break;
             }
@@ -55,7 +55,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         uint leaf = visit_leaf(r, n, leaf_t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || leaf_t1 >= t1_scene) return true;
-        if (ROBUST && (leaf_t1 != exit_t || near_t0(t_next, exit_t) || near_t0(exit_t, t0))) {
+        if (ROBUST && (leaf_t1 != exit_t || near_t0(r, t_next, exit_t) || near_t0(r, exit_t, t0))) {
             // Left near an edge or corner of the leaf (or a sliver of it).
             t0 = max(t0, leaf_t1);
             fallback = true;
@@ -66,7 +66,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         crossed = box_face_plane(node, face);
         // Never step backwards: keep t0 when rounding puts the exit behind it.
         t0 = max(t0, leaf_t1);
-        t1 = min(t1_scene, best_reach(best));
+        t1 = min(t1_scene, reach_t(r, best));
         node = next;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;

@@ -120,6 +120,9 @@ pub struct Cell {
     pub counters: Option<[f64; 3]>,
     /// Verdicts on the judged sample.
     pub tally: Tally,
+    /// Rays of the whole cell (not only the sample) that did not finish
+    /// traversal (`PRIM_INCOMPLETE`; 0 for Embree).
+    pub incomplete: usize,
     /// The baseline's median trace time over this cell's (same scene and rays); > 1 is faster.
     pub speedup: f64,
 }
@@ -278,6 +281,7 @@ pub fn run_scene(
         wall_seconds: f64::NAN,
         counters: None,
         tally: Tally::default(),
+        incomplete: 0,
         speedup: f64::NAN,
     };
     let mut cells = Vec::new();
@@ -321,6 +325,7 @@ pub fn run_scene(
                         wall_seconds: wall[0],
                         counters: counted.counters.as_deref().map(mean_counters),
                         tally: batch.judge(&scene.triangles, &result.hits),
+                        incomplete: result.incomplete().len(),
                         ..cell(batch.kind, Backend::Gpu, builder, batch.rays.len())
                     });
                 }
@@ -353,6 +358,7 @@ pub fn run_scene(
                     wall_seconds: wall[0],
                     counters: Some(mean_counters(&counters)),
                     tally: batch.judge(&scene.triangles, &hits),
+                    incomplete: crate::trace::incomplete_rays(&hits).len(),
                     ..cell(batch.kind, Backend::Cpu, builder, batch.rays.len())
                 });
             }

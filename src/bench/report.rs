@@ -31,7 +31,7 @@ fn ms(s: f64) -> f64 {
 pub fn markdown_table(cells: &[Cell]) -> String {
     let base = baselines(cells);
     let mut out = String::from(
-        "| scene | rays | settings | build ms | upload ms | pipeline ms | trace ms (min–max) | call ms | M rays/s | × baseline | nodes/ray | leaves/ray | tris/ray | disagree | classes | serious |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | rays | settings | build ms | upload ms | pipeline ms | trace ms (min–max) | call ms | M rays/s | × baseline | nodes/ray | leaves/ray | tris/ray | disagree | classes | serious | incomplete |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (i, c) in cells.iter().enumerate() {
         let counters = match c.counters {
@@ -41,7 +41,7 @@ pub fn markdown_table(cells: &[Cell]) -> String {
         let is_base = base.get(&(c.scene.clone(), c.kind)) == Some(&i);
         let _ = writeln!(
             out,
-            "| {} | {} {} | {}{} | {:.1} | {:.1} | {:.1} | {:.2} ({:.2}–{:.2}) | {:.2} | {:.2} | {:.2} | {} | {}/{} ({:.2}%) | {} | {} |",
+            "| {} | {} {} | {}{} | {:.1} | {:.1} | {:.1} | {:.2} ({:.2}–{:.2}) | {:.2} | {:.2} | {:.2} | {} | {}/{} ({:.2}%) | {} | {} | {} |",
             c.scene,
             c.rays,
             c.kind,
@@ -61,7 +61,8 @@ pub fn markdown_table(cells: &[Cell]) -> String {
             c.tally.rays,
             100.0 * c.disagreeing() as f64 / c.tally.rays.max(1) as f64,
             classes(c),
-            c.tally.serious()
+            c.tally.serious(),
+            c.incomplete
         );
     }
     out
@@ -123,7 +124,7 @@ fn snake(name: &str) -> String {
 /// Every cell as CSV, one row per cell, with every verdict's count.
 pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
     let mut text = String::from(
-        "scene,kind,backend,threads,builder,traversal,variant,stack_size,packet_width,robust,any_hit,rays,build_s,upload_s,pipeline_s,trace_s_median,trace_s_min,trace_s_max,call_s_median,rays_per_second,speedup_vs_baseline,nodes_per_ray,leaves_per_ray,triangles_per_ray,sample,agree,disagree_rate,serious",
+        "scene,kind,backend,threads,builder,traversal,variant,stack_size,packet_width,robust,any_hit,rays,build_s,upload_s,pipeline_s,trace_s_median,trace_s_min,trace_s_max,call_s_median,rays_per_second,speedup_vs_baseline,nodes_per_ray,leaves_per_ray,triangles_per_ray,sample,agree,disagree_rate,serious,incomplete",
     );
     for v in Verdict::ALL {
         text += &format!(",{}", snake(v.name()));
@@ -137,7 +138,7 @@ pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
         };
         let _ = write!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.0},{:.4},{n},{l},{tr},{},{},{:.6},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.0},{:.4},{n},{l},{tr},{},{},{:.6},{},{}",
             c.scene,
             c.kind,
             c.backend.name(),
@@ -163,6 +164,7 @@ pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
             c.tally.agreeing(),
             c.disagreeing() as f64 / c.tally.rays.max(1) as f64,
             c.tally.serious(),
+            c.incomplete,
         );
         for n in c.tally.counts {
             let _ = write!(text, ",{n}");

@@ -228,11 +228,20 @@ impl<'a> SceneRef<'a> {
     }
 }
 
+/// The ray as traversal sees it: `TraceRay` of common.glsl. Traversal t values
+/// are in the segment frame (`t - t_shift`, from `origin + origin_lo`); hits,
+/// `tmin` and `tmax` in the ray's own parameter.
 struct TraceRay {
     wr: WatertightRay,
     /// [`Traversal::robust`]: the widening of the split decisions.
     eps: f32,
+    robust: bool,
+    /// The segment frame's origin (the ray's own unless shifted).
     origin: Vec3,
+    origin_lo: Vec3,
+    t_shift: f32,
+    /// Absolute error bound of a segment-frame plane distance (0 unless shifted).
+    t_err: f32,
     dir: Vec3,
     inv_dir: Vec3,
     tmin: f32,
@@ -263,10 +272,14 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
     } else {
         let origin = Vec3::from(ray.origin);
         let dir = ray.traced_dir();
-        let r = TraceRay {
+        let mut r = TraceRay {
             wr: WatertightRay { robust: traversal.robust, ..WatertightRay::new(origin, dir).with_tmax(ray.tmax) },
             eps: if traversal.robust { T_EPS } else { 0.0 },
+            robust: traversal.robust,
             origin,
+            origin_lo: Vec3::ZERO,
+            t_shift: 0.0,
+            t_err: 0.0,
             dir,
             // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
             inv_dir: (Vec3::ONE / dir).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX)),
@@ -274,7 +287,11 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             tmax: ray.tmax,
             any_hit: traversal.any_hit,
         };
-        if let Some((t0, t1)) = clip_to_box(&r, &scene.bounds) {
+        let mut clipped = clip_to_box(&r, &scene.bounds);
+        if let (true, Some((t0, _))) = (traversal.robust, clipped) {
+            clipped = shift_to_scene(&mut r, &scene.bounds, t0);
+        }
+        if let Some((t0, t1)) = clipped {
             let mut s = State { scene, r: &r, best: &mut best, closest: Closest::NONE, c: &mut c };
             let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
             let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
@@ -335,7 +352,12 @@ impl State<'_, '_> {
     /// The farthest `t` at which the closest hit's exact `t` may lie (`best_reach`
     /// in common.glsl): cells beyond it cannot hold a closer hit.
     fn reach(&self) -> f32 {
-        self.best.t + self.closest.err
+        let reach = self.best.t + self.closest.err;
+        if self.r.robust {
+            reach - self.r.t_shift
+        } else {
+            reach
+        }
     }
 
     /// Tests a leaf; true when traversal is done: an any-hit found one, or the
@@ -355,10 +377,57 @@ impl State<'_, '_> {
 /// (Ize 2013). Widens the far bound so rounding never clips away a hit on the box.
 const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
 
+/// Distance (segment frame) to the plane `axis` = `plane`: `plane_t` in common.glsl.
+fn plane_t(r: &TraceRay, axis: usize, plane: f32) -> f32 {
+    let d = if r.robust { (plane - r.origin[axis]) - r.origin_lo[axis] } else { plane - r.origin[axis] };
+    d * r.inv_dir[axis]
+}
+
+/// `seg_err` in common.glsl: the absolute widening of a robust shifted ray.
+fn seg_err(r: &TraceRay) -> f32 {
+    if r.robust {
+        r.t_err
+    } else {
+        0.0
+    }
+}
+
+/// Twin of `shift_to_scene` in trace.comp: a robust ray from more than
+/// [`SHIFT_DIAGONALS`](crate::consts::SHIFT_DIAGONALS) scene diagonals away is
+/// traversed from its entry `t0` into the box, with the bound `t_err`; returns
+/// the clip there (None: it misses after all).
+fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
+    let ext = b.max - b.min;
+    let diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
+    let dist = t0 * glsl_max(r.dir.x.abs(), glsl_max(r.dir.y.abs(), r.dir.z.abs()));
+    let far2 = (crate::consts::SHIFT_DIAGONALS * crate::consts::SHIFT_DIAGONALS) as f32 * diag2;
+    if !(t0 > 0.0 && dist * dist > far2) {
+        return clip_to_box(r, b);
+    }
+    let t_shift = t0 as f64;
+    let mut hi = Vec3::ZERO;
+    let mut lo = Vec3::ZERO;
+    let mut e = 0.0f64;
+    for axis in 0..3 {
+        let (o, d) = (r.origin[axis] as f64, r.dir[axis] as f64);
+        let p = o + t_shift * d;
+        hi[axis] = p as f32;
+        lo[axis] = (p - hi[axis] as f64) as f32;
+        let a = (hi[axis] as f64).abs() * 2f64.powi(-45) + (o.abs() + (t_shift * d).abs()) * 2f64.powi(-50);
+        if r.dir[axis] != 0.0 {
+            e = e.max(a / d.abs());
+        }
+    }
+    r.t_err = ((e * 1.000001) as f32).max(f32::MIN_POSITIVE);
+    r.origin = hi;
+    r.origin_lo = lo;
+    r.t_shift = t0;
+    clip_to_box(r, b)
+}
+
 /// Slab clip of [tmin, tmax] to the scene box; twin of `clip_to_box` in common.glsl.
 fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
-    let mut t0 = r.tmin;
-    let mut t1 = r.tmax;
+    let (mut t0, mut t1) = if r.robust { (r.tmin - r.t_shift, r.tmax - r.t_shift) } else { (r.tmin, r.tmax) };
     for axis in 0..3 {
         let o = r.origin[axis];
         if r.dir[axis] == 0.0 {
@@ -367,10 +436,10 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
             }
             continue;
         }
-        let ta = (b.min[axis] - o) * r.inv_dir[axis];
-        let tb = (b.max[axis] - o) * r.inv_dir[axis];
-        let tnear = glsl_min(ta, tb);
-        let tfar = glsl_max(ta, tb) * TFAR_SCALE;
+        let ta = plane_t(r, axis, b.min[axis]);
+        let tb = plane_t(r, axis, b.max[axis]);
+        let tnear = glsl_min(ta, tb) - seg_err(r);
+        let tfar = glsl_max(ta, tb) * TFAR_SCALE + seg_err(r);
         t0 = glsl_max(t0, tnear);
         t1 = glsl_min(t1, tfar);
     }
@@ -452,12 +521,12 @@ fn decide_children(
     let (below, above) = (index + 1, n.above_child());
     let (near, far) = if below_first { (below, above) } else { (above, below) };
     // Clamped finite, so that the widening below never computes inf - inf.
-    let ts = ((split - o) * r.inv_dir[axis]).clamp(-f32::MAX, f32::MAX);
+    let ts = plane_t(r, axis, split).clamp(-f32::MAX, f32::MAX);
     // Conservative (see common.glsl): one child only beyond rounding; after a
     // restart, planes before t0 are passed, and so is the exit plane at t0.
-    let eps = r.eps;
-    let (ts_lo, ts_hi) = (ts - eps * ts.abs(), ts + eps * ts.abs());
-    let (t0_lo, t1_hi) = (t0 - eps * t0.abs(), t1 + eps * t1.abs());
+    let (eps, err) = (r.eps, seg_err(r));
+    let (ts_lo, ts_hi) = (ts - eps * ts.abs() - err, ts + eps * ts.abs() + err);
+    let (t0_lo, t1_hi) = (t0 - eps * t0.abs() - err, t1 + eps * t1.abs() + err);
     let far_only = match exit_plane {
         ExitPlane::None => ts_hi < t0_lo,
         ExitPlane::Any => ts <= t0,
@@ -674,7 +743,7 @@ fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, known
 /// `t_from`: leaves whose segment ends before it (less the widening) are done
 /// already (the fallback of robust backtrack and ropes); `-f32::MAX` for none.
 fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: bool, t_from: f32) -> bool {
-    let t_from_lo = t_from - T_EPS * t_from.abs();
+    let t_from_lo = t_from - T_EPS * t_from.abs() - seg_err(s.r);
     let mut node = 0u32;
     let (mut restart_node, mut restart_t0, mut restart_t1) = (0u32, t0, t1);
     let mut push_down = use_push_down;
@@ -938,7 +1007,7 @@ fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize, f32) {
         }
         let positive = r.dir[axis] > 0.0;
         let plane = if positive { b[3 + axis] } else { b[axis] };
-        let t = (plane - r.origin[axis]) * r.inv_dir[axis];
+        let t = plane_t(r, axis, plane);
         if t < t_exit {
             t_next = t_exit;
             t_exit = t;
@@ -958,17 +1027,17 @@ fn box_face_plane(b: &[f32; 6], face: usize) -> ExitPlane {
 }
 
 /// Twin of `near_t0` in common.glsl: `ts` within the widening of `t0`.
-fn near_t0(ts: f32, t0: f32) -> bool {
-    (ts - t0).abs() <= T_EPS * glsl_min(glsl_max(ts.abs(), t0.abs()), f32::MAX)
+fn near_t0(r: &TraceRay, ts: f32, t0: f32) -> bool {
+    (ts - t0).abs() <= T_EPS * glsl_min(glsl_max(ts.abs(), t0.abs()), f32::MAX) + seg_err(r)
 }
 
 /// Twin of `ambiguous_decision` in common.glsl: a ray inside the split plane, or
 /// a plane within rounding of t0 that is not `crossed`.
-fn ambiguous_decision(visit: &Visit, n: KdNode, ts: f32, t0: f32, crossed: ExitPlane) -> bool {
+fn ambiguous_decision(r: &TraceRay, visit: &Visit, n: KdNode, ts: f32, t0: f32, crossed: ExitPlane) -> bool {
     match visit {
         Visit::BothSame => true,
         Visit::Near => false,
-        _ => near_t0(ts, t0) && node_plane(n) != crossed,
+        _ => near_t0(r, ts, t0) && node_plane(n) != crossed,
     }
 }
 
@@ -986,7 +1055,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
-            if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
+            if robust && ambiguous_decision(s.r, &visit, n, ts, t0, crossed) {
                 return trace_restart_exact(s, t_scene0, t1_scene, true, t0);
             }
             match visit {
@@ -1007,7 +1076,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
         if robust {
             // Left near an edge or corner of the leaf's box: a second face within rounding.
             let (leaf_exit, _, t_next) = box_exit(s.r, &links.boxes[node as usize]);
-            if near_t0(t_next, leaf_exit) {
+            if near_t0(s.r, t_next, leaf_exit) {
                 return trace_restart_exact(s, t_scene0, t1_scene, true, t1);
             }
         }
@@ -1023,7 +1092,7 @@ fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32)
             s.c.nodes += 1;
             let b = &links.boxes[node as usize];
             (exit, face, _) = box_exit(s.r, b);
-            if robust && near_t0(exit, t0) && box_face_plane(b, face) != crossed {
+            if robust && near_t0(s.r, exit, t0) && box_face_plane(b, face) != crossed {
                 ambiguous = true;
             }
             depth += 1;
@@ -1058,7 +1127,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, exit_plane);
-            if robust && ambiguous_decision(&visit, n, ts, t0, crossed) {
+            if robust && ambiguous_decision(s.r, &visit, n, ts, t0, crossed) {
                 return trace_restart_exact(s, t_scene0, t1_scene, true, t0);
             }
             match visit {
@@ -1078,7 +1147,7 @@ fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scene: f32) -> 
         if s.leaf(n, leaf_t1) || leaf_t1 >= t1_scene {
             return true;
         }
-        if robust && (leaf_t1 != exit || near_t0(t_next, exit) || near_t0(exit, t0)) {
+        if robust && (leaf_t1 != exit || near_t0(s.r, t_next, exit) || near_t0(s.r, exit, t0)) {
             // Left near an edge or corner of the leaf (or a sliver of it).
             return trace_restart_exact(s, t_scene0, t1_scene, true, glsl_max(t0, leaf_t1));
         }

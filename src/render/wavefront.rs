@@ -590,6 +590,9 @@ pub struct RenderOutput {
     pub first_hits: Option<Vec<crate::geom::Hit>>,
     /// What it measured.
     pub stats: RenderStats,
+    /// Pixels (row-major indices) that had a ray the tracer marked invalid or
+    /// incomplete in some sample: their value lacks that ray's light.
+    pub bad_pixels: Vec<usize>,
 }
 
 /// One ray queue: rays, their paths and their hits.
@@ -617,8 +620,10 @@ const SHADOW_QUEUE_BYTES: u64 = 256 << 20;
 /// `progress(done, total)` is called after each sample pass.
 ///
 /// Errors: `Error::InvalidInput` for bad settings; `Error::DeviceLimit` when the
-/// image or the scene exceed the device's buffer limits; `Error::Incomplete`
-/// `Error::RenderRays` when the tracer reported rays it could not finish.
+/// image or the scene exceed the device's buffer limits. Rays the tracer could
+/// not finish (or invalid rays from degenerate geometry) do not fail the
+/// render: they are counted in [`RenderStats::bad_rays`] and their pixels are
+/// listed in [`RenderOutput::bad_pixels`].
 pub fn render(
     tracer: &mut Tracer,
     scene: &Scene,
@@ -1076,16 +1081,15 @@ pub fn render_progressive(
             stats.raster_seconds = Some(times[Kind::Raster as usize]);
         }
     }
-    if stats.bad_rays > 0 {
-        return Err(Error::RenderRays(stats.bad_rays));
-    }
     let sums: &[[f32; 4]] = bytemuck::cast_slice(readback.read(0, (pixel_count * 16) as usize)?);
     let scale = 1.0 / settings.spp as f32;
     let pixels = sums.iter().map(|s| Vec3::new(s[0], s[1], s[2]) * scale).collect();
+    // The shade and resolve kernels count a pixel's bad rays in its sum's w.
+    let bad_pixels = sums.iter().enumerate().filter(|(_, s)| s[3] > 0.0).map(|(i, _)| i).collect();
     ctx.check_validation()?;
     drop((trace_sets, shadow_set));
     drop(raster);
-    Ok(RenderOutput { width, height, pixels, plan, stats, first_hits })
+    Ok(RenderOutput { width, height, pixels, plan, stats, first_hits, bad_pixels })
 }
 
 /// Timestamp pairs one submission records at most (one per dispatch).
