@@ -16,6 +16,7 @@
 layout(local_size_x = 64) in;
 
 layout(constant_id = 0) const bool ROBUST = true;
+const bool SEGMENT_FRAME = false;  // camera rays are never moved (see trace.comp)
 
 #include "triangle.glsl"
 
@@ -44,11 +45,12 @@ void main() {
         Ray ray = rays[i];
         WatertightRay wr = watertight_ray(ray.origin, ray.dir);
         wr.ray_tmax = ray.tmax;
-        float t, u, v, e;
+        wr.seg_tmax = ray.tmax;
+        float t, u, v, e, err64;
         double t64;
         uint result = intersect_triangle_f32(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v, e);
         bool found = (result == TRI_HIT && t <= ray.tmax)
-            || (result == TRI_UNSURE && intersect_triangle_f64(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, t, u, v, t64));
+            || (result == TRI_UNSURE && intersect_triangle_f64(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, t, u, v, t64, err64));
         if (!found) {
             // An edge tie: the plane hit, barycentrics clamped into the triangle.
             vec3 e1 = s.v1.xyz - s.v0.xyz;

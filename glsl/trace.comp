@@ -25,6 +25,10 @@ layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = s
 layout(constant_id = 5) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
 layout(constant_id = 6) const uint PASS = PASS_ONE;   // PASS_FAST / PASS_CAREFUL: robust single rays (see main)
 
+// Far rays move to the scene box (shift_to_scene below) in the kernels that
+// trace carefully: the careful pass and packets. The fast pass lists them.
+const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
+
 #include "triangle.glsl"
 
 
@@ -80,17 +84,16 @@ bool ray_is_valid(Ray ray) {
 //   most 2^-52 (|o| + |t0 d|), |hi + lo - p| at most 2^-46 |hi|;
 // - (plane - hi) - lo in f32 adds 2^-24 relative (covered by T_EPS) and 2^-47 |hi|.
 // Doubled, divided by |d| per axis, the largest over the axes the ray moves on.
+// The f32 triangle test then works from hi + lo too (WatertightRay in
+// triangle.glsl), with seg_err = |lo| + 2^20 a per axis (a as below, over
+// EDGE_GAMMA) in its error bounds, and answers in the segment frame; the f64
+// test keeps the ray's own origin and converts its t.
+// Only the kernels that trace carefully hold this code (SEGMENT_FRAME): the fast
+// pass lists far rays for the careful one, so near rays do not pay for it.
 // Returns false when the ray misses the box after all.
 bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     vec3 bmin = params.scene_min.xyz;
     vec3 bmax = params.scene_max.xyz;
-    // Squared lengths (no sqrt, whose rounding GPUs do not fix).
-    precise vec3 ext = bmax - bmin;
-    precise float diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
-    vec3 ad = abs(r.dir);
-    precise float dist = t0 * max(ad.x, max(ad.y, ad.z));
-    precise float far2 = float(SHIFT_DIAGONALS * SHIFT_DIAGONALS) * diag2;
-    if (!(t0 > 0.0 && dist * dist > far2)) return true;
     dvec3 o = dvec3(r.origin);
     dvec3 d = dvec3(r.dir);
     double t_shift = double(t0);
@@ -108,7 +111,24 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     r.origin = hi;
     r.origin_lo = lo;
     r.t_shift = t0;
+    r.wr.seg_origin = hi;
+    r.wr.seg_lo = lo;
+    r.wr.seg_err = vec3(abs(rest) + a * 1048576.0LF);  // 2^20
+    r.wr.t_shift = t0;
+    precise float seg_tmax = r.tmax - t0;
+    r.wr.seg_tmax = seg_tmax;
     return clip_to_box(r, bmin, bmax, t0, t1);
+}
+
+// True when the box entry t0 lies more than SHIFT_DIAGONALS scene diagonals
+// along the ray (squared lengths: no sqrt, whose rounding GPUs do not fix).
+bool is_far(TraceRay r, float t0) {
+    precise vec3 ext = params.scene_max.xyz - params.scene_min.xyz;
+    precise float diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
+    vec3 ad = abs(r.dir);
+    precise float dist = t0 * max(ad.x, max(ad.y, ad.z));
+    precise float far2 = float(SHIFT_DIAGONALS * SHIFT_DIAGONALS) * diag2;
+    return t0 > 0.0 && dist * dist > far2;
 }
 
 // Runs the variant on one ray (every lane enters for packets: their decisions
@@ -184,15 +204,24 @@ void trace_ray(uint index) {
     r.t_err = 0.0;
     r.wr = watertight_ray(ray.origin, ray.dir);
     r.wr.ray_tmax = ray.tmax;
+    r.wr.seg_tmax = ray.tmax;
     float t0 = 0.0, t1 = 0.0;
     bool alive = valid && clip_to_box(r, params.scene_min.xyz, params.scene_max.xyz, t0, t1);
-    if (ROBUST && alive) alive = shift_to_scene(r, t0, t1);
+    bool far = ROBUST && alive && is_far(r, t0);
+    if (SEGMENT_FRAME && far) {
+        alive = shift_to_scene(r, t0, t1);
+        precise float best_seg = ray.tmax - r.t_shift;
+        best.t = best_seg;  // the segment frame, like every hit below
+    }
+    // The fast pass leaves far rays to the careful one (without tracing them).
+    bool skip = PASS == PASS_FAST && far;
+    if (skip) needs_careful = true;
     if (!valid) best.prim_id = PRIM_INVALID;
     // Robust single rays trace fast first, then carefully in a second dispatch when
     // the fast trace met what it could not decide in f32 (see careful_pass in
     // common.glsl). Packets trace once, carefully: their kernels are large and
     // slower than single rays on lavapipe anyway.
-    bool finished = run_traversal(alive, r, t0, t1, best, c);
+    bool finished = run_traversal(alive && !skip, r, t0, t1, best, c);
     if (PASS == PASS_FAST && alive && needs_careful) {
         uint slot = atomicAdd(careful[3], 1u);
         careful[CAREFUL_HEADER_WORDS + slot] = index;
@@ -209,6 +238,8 @@ void trace_ray(uint index) {
         return;
     }
     if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
+    // Back to the ray's own parameter (one rounding, in f64).
+    if (SEGMENT_FRAME && r.t_shift != 0.0) best.t = float(double(best.t) + double(r.t_shift));
     if (best.prim_id >= PRIM_INCOMPLETE) {
         best.t = best.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
         best.u = 0.0;

@@ -167,8 +167,22 @@ pub struct WatertightRay {
     pub sy: f32,
     /// Scale `1 / dir[kz]`.
     pub sz: f32,
-    /// Ray origin; the vertices are translated by `-origin` before the shear.
+    /// Ray origin; the f64 test translates the vertices by `-origin` before the shear.
     pub origin: Vec3,
+    /// The segment frame (`TraceRay` in common.glsl): the f32 test translates by
+    /// `-(seg_origin + seg_lo)`, the point `origin + t_shift·dir` of the ray, and
+    /// answers `t - t_shift`; `seg_err` bounds (per axis, scaled by
+    /// `1/EDGE_GAMMA`) how far `seg_origin + seg_lo` may lie from that point.
+    /// `origin`, 0, 0, 0 unless a far ray was shifted to the scene box.
+    pub seg_origin: Vec3,
+    /// See `seg_origin`.
+    pub seg_lo: Vec3,
+    /// See `seg_origin`.
+    pub seg_err: Vec3,
+    /// See `seg_origin`.
+    pub t_shift: f32,
+    /// `ray_tmax - t_shift`: the ray's own end in the segment frame (f32 test).
+    pub seg_tmax: f32,
     /// Ray direction, for the f64 fallback near edges.
     pub dir: Vec3,
     /// The ray's own `tmax` (the `tmax` argument of [`WatertightRay::intersect`]
@@ -249,6 +263,11 @@ impl WatertightRay {
             sy: dir[ky] * sz,
             sz,
             origin,
+            seg_origin: origin,
+            seg_lo: Vec3::ZERO,
+            seg_err: Vec3::ZERO,
+            t_shift: 0.0,
+            seg_tmax: f32::INFINITY,
             dir,
             ray_tmax: f32::INFINITY,
             robust: true,
@@ -257,7 +276,7 @@ impl WatertightRay {
 
     /// The same constants for a ray ending at `tmax`.
     pub fn with_tmax(self, tmax: f32) -> Self {
-        WatertightRay { ray_tmax: tmax, ..self }
+        WatertightRay { ray_tmax: tmax, seg_tmax: tmax, ..self }
     }
 
     /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
@@ -271,7 +290,7 @@ impl WatertightRay {
             TriTest::Hit(t, u, v, _) => (t <= tmax).then_some((t, u, v)),
             TriTest::Miss => None,
             TriTest::Unsure => {
-                self.intersect_f64(v0, v1, v2, tmin).filter(|h| h.0 <= tmax).map(|(t, u, v, _)| (t, u, v))
+                self.intersect_f64(v0, v1, v2, tmin).filter(|h| h.0 <= tmax).map(|(t, u, v, _, _)| (t, u, v))
             }
         }
     }
@@ -290,9 +309,9 @@ impl WatertightRay {
     #[inline]
     pub fn intersect_f32(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> TriTest {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
-        let a = v0 - self.origin;
-        let b = v1 - self.origin;
-        let c = v2 - self.origin;
+        let a = (v0 - self.seg_origin) - self.seg_lo;
+        let b = (v1 - self.seg_origin) - self.seg_lo;
+        let c = (v2 - self.seg_origin) - self.seg_lo;
         // Shear and scale the vertices into ray space.
         let ax = a[kx] - self.sx * a[kz];
         let ay = a[ky] - self.sy * a[kz];
@@ -316,12 +335,15 @@ impl WatertightRay {
             }
         } else {
             // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
-            let aex = a[kx].abs() + (self.sx * a[kz]).abs();
-            let aey = a[ky].abs() + (self.sy * a[kz]).abs();
-            let bex = b[kx].abs() + (self.sx * b[kz]).abs();
-            let bey = b[ky].abs() + (self.sy * b[kz]).abs();
-            let cex = c[kx].abs() + (self.sx * c[kz]).abs();
-            let cey = c[ky].abs() + (self.sy * c[kz]).abs();
+            // A shifted origin adds its own error (seg_err, 0 unless shifted).
+            let ex = self.seg_err[kx] + (self.sx * self.seg_err[kz]).abs();
+            let ey = self.seg_err[ky] + (self.sy * self.seg_err[kz]).abs();
+            let aex = (a[kx].abs() + (self.sx * a[kz]).abs()) + ex;
+            let aey = (a[ky].abs() + (self.sy * a[kz]).abs()) + ey;
+            let bex = (b[kx].abs() + (self.sx * b[kz]).abs()) + ex;
+            let bey = (b[ky].abs() + (self.sy * b[kz]).abs()) + ey;
+            let cex = (c[kx].abs() + (self.sx * c[kz]).abs()) + ex;
+            let cey = (c[ky].abs() + (self.sy * c[kz]).abs()) + ey;
             // Each sheared coordinate lies within EDGE_GAMMA·m of its exact value, m the
             // largest magnitude before the shear cancelled; with l the largest
             // |coordinate|, an edge function is off by less than EDGE_GAMMA·m·(4.2·l +
@@ -356,7 +378,8 @@ impl WatertightRay {
             // A bound on |t − exact t|: the edge functions' errors δu_i move t_scaled −
             // t·det by Σ δu_i (z_i − t), and |z_i − t| is at most the spread of the z_i;
             // then the roundings of t_scaled, det and t.
-            let t_err = EDGE_GAMMA * ((u * az).abs() + (v * bz).abs() + (w * cz).abs());
+            let ez = (u.abs() + v.abs() + w.abs()) * (self.sz * self.seg_err[kz]).abs();
+            let t_err = EDGE_GAMMA * (((u * az).abs() + (v * bz).abs() + (w * cz).abs()) + ez);
             let weights_err = eu + ev + ew;
             let spread = az.max(bz).max(cz) - az.min(bz).min(cz);
             e = (t_err + weights_err * spread + EDGE_GAMMA * t_scaled.abs()) / det.abs() + EDGE_GAMMA * t.abs();
@@ -364,12 +387,12 @@ impl WatertightRay {
             // surface, a shadow ray ending on a vertex): decide in f64 which side of the
             // bound it lies on (see triangle.glsl).
             let near_tmin = !tmin.is_infinite() && (t - tmin).abs() <= e;
-            let near_tmax = !self.ray_tmax.is_infinite() && (t - self.ray_tmax).abs() <= e;
+            let near_tmax = !self.seg_tmax.is_infinite() && (t - self.seg_tmax).abs() <= e;
             if near_tmin || near_tmax {
                 return TriTest::Unsure;
             }
         }
-        let below = t <= tmax || (self.robust && t - e <= tmax && t <= self.ray_tmax);
+        let below = t <= tmax || (self.robust && t - e <= tmax && t <= self.seg_tmax);
         if !(t >= tmin && below) {
             return TriTest::Miss;
         }
@@ -384,10 +407,12 @@ impl WatertightRay {
     /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
     /// of them, never none.
     ///
-    /// The hit's `t` lies in `[tmin, ray_tmax]` (exactly, in f64); the answer is
-    /// `(t, u, v, t64)`, `t64` the f64 `t` by which callers order hits whose f32
-    /// `t` lie within rounding of each other.
-    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32) -> Option<(f32, f32, f32, f64)> {
+    /// The hit's `t` lies in `[tmin, ray_tmax]` (exactly, in f64, in the ray's
+    /// own parameter); the answer is `(t, u, v, t64, err)` in the segment frame
+    /// (`t - t_shift`), `t64` the f64 `t` by which callers order hits whose f32
+    /// `t` lie within rounding of each other, and, for a shifted ray, `err` a
+    /// bound on `t64`'s error (0 otherwise: callers use `EDGE_GAMMA·|t|`).
+    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32) -> Option<(f32, f32, f32, f64, f32)> {
         let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
         let a = v0.as_dvec3() - o;
         let b = v1.as_dvec3() - o;
@@ -429,6 +454,16 @@ impl WatertightRay {
         if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64) {
             return None;
         }
-        Some((t64 as f32, (v / det) as f32, (w / det) as f32, t64))
+        // The segment frame (see triangle.glsl): t less t_shift, with a bound on
+        // the error of num, den and the subtraction when shifted.
+        let t_seg = t64 - self.t_shift as f64;
+        let mut err = 0.0f32;
+        if self.t_shift != 0.0 {
+            let num_mag = (a.x * nx).abs() + (a.y * ny).abs() + (a.z * nz).abs();
+            let den_mag = (d.x * nx).abs() + (d.y * ny).abs() + (d.z * nz).abs();
+            let bound = (num_mag + t64.abs() * den_mag) / den.abs() * 2f64.powi(-49) + t64.abs() * 2f64.powi(-50);
+            err = (bound * 1.000001) as f32;
+        }
+        Some((t_seg as f32, (v / det) as f32, (w / det) as f32, t_seg, err))
     }
 }

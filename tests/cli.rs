@@ -309,6 +309,34 @@ fn trace_writes_every_hit_and_exits_3_when_rays_did_not_finish() {
     }
 }
 
+/// `render` keeps the image when rays did not finish: it counts them, exits 3,
+/// and `--explain` paints their pixels magenta (lavapipe 22.x, whose loop
+/// budget the 70,000-triangle leaf exceeds; elsewhere it renders and exits 0).
+#[test]
+fn render_counts_unfinished_rays_and_explain_paints_them() {
+    let mut obj = String::from("v -1 -1 0\nv 1 -1 0\nv -1 1 0\n");
+    for _ in 0..70_000 {
+        obj.push_str("f 1 2 3\n");
+    }
+    let scene = temp("stacked-render.obj");
+    std::fs::write(&scene, obj).unwrap();
+    let out = temp("stacked.png");
+    let args = ["--width", "16", "--height", "16", "--eye", "-0.5,-0.5,-3", "--target", "-0.5,-0.5,0", "--fov", "10"];
+    let mut all = vec!["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--explain"];
+    all.extend(args);
+    let o = kdtrace(&all);
+    let img = image::open(&out).unwrap().to_rgb8();
+    let magenta = img.pixels().filter(|p| p[0] > 200 && p[1] < 50 && p[2] > 200).count();
+    match o.status.code() {
+        Some(3) => {
+            assert!(stderr(&o).contains("did not finish traversal"), "{}", stderr(&o));
+            assert!(magenta > 0, "no pixel painted: {}", stderr(&o));
+        }
+        Some(0) => assert_eq!(magenta, 0),
+        _ => panic!("render failed: {}", stderr(&o)),
+    }
+}
+
 /// `verify` exits 0 when every answer agrees or differs harmlessly, and prints
 /// the node visits per category.
 #[test]

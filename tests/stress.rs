@@ -218,9 +218,7 @@ fn stress_deep_trees_and_far_rays() {
     let mut tracer = None;
     let mut failures = Vec::new();
     for (name, rays_per_category) in [("bunny.obj", 48), ("q3_20kdm2.obj", 48), ("dragon_200k.obj", 24)] {
-        if !scene_path(name).exists() {
-            assert!(std::env::var_os("CI").is_none(), "{name} is missing (tools/fetch-scenes)");
-            eprintln!("skipping {name}: not in scenes/ (tools/fetch-scenes)");
+        if common::fetched_scene(name).is_none() {
             continue;
         }
         let (scene, tree, _) = scaled_scene(name, 1.0);

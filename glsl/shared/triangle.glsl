@@ -17,12 +17,23 @@
 #ifndef TRIANGLE_GLSL
 #define TRIANGLE_GLSL
 
+// The f64 test works from `origin`, in the ray's own parameter. The f32 test
+// works in the segment frame (TraceRay in traverse/common.glsl): from the point
+// seg_origin + seg_lo = origin + t_shift * dir (a far ray moved to the scene
+// box), answering t - t_shift; seg_err bounds, per axis and divided by
+// EDGE_GAMMA, how far that point may lie from the exact one. Unshifted:
+// seg_origin = origin and the rest 0. CPU twin: WatertightRay in src/geom.rs.
 struct WatertightRay {
     uint kx, ky, kz;
     float sx, sy, sz;
     vec3 origin;
+    vec3 seg_origin;
+    vec3 seg_lo;
+    vec3 seg_err;
+    float t_shift;
     vec3 dir;
     float ray_tmax;  // the ray's own tmax (the tmax argument of a test is the closest hit so far)
+    float seg_tmax;  // ray_tmax - t_shift
 };
 
 WatertightRay watertight_ray(vec3 origin, vec3 dir) {
@@ -41,8 +52,13 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
     precise float sy = dir[ky] * sz;
     r.sx = sx; r.sy = sy;
     r.origin = origin;
+    r.seg_origin = origin;
+    r.seg_lo = vec3(0.0);
+    r.seg_err = vec3(0.0);
+    r.t_shift = 0.0;
     r.dir = dir;
     r.ray_tmax = uintBitsToFloat(0x7f800000u);
+    r.seg_tmax = r.ray_tmax;
     return r;
 }
 
@@ -86,8 +102,13 @@ double diff_of_products(double a, double b, double c, double d) {
 // The hit's t lies in [tmin, r.ray_tmax] (exactly, in f64); `t64_out` is its f64
 // value, by which callers order hits whose f32 t lie within rounding of each
 // other (see intersect_leaf in traverse/common.glsl).
+//
+// Answers in the segment frame: t_out and t64_out are t - t_shift, and for a
+// shifted ray err_out bounds t64_out's error (num, den and the subtraction;
+// 0 unshifted, where callers use EDGE_GAMMA |t|).
 bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin,
-                            out float t_out, out float u_out, out float v_out, out double t64_out) {
+                            out float t_out, out float u_out, out float v_out, out double t64_out,
+                            out float err_out) {
     dvec3 o = dvec3(r.origin);
     dvec3 d = dvec3(r.dir);
     precise dvec3 a = dvec3(v0) - o;
@@ -125,8 +146,17 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise double t64 = num / den;
     // Exact against the ray's bounds.
     if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax))) return false;
-    t_out = float(t64);
-    t64_out = t64;
+    precise double t_seg = SEGMENT_FRAME ? t64 - double(r.t_shift) : t64;
+    err_out = 0.0;
+    if (SEGMENT_FRAME && r.t_shift != 0.0) {
+        precise double num_mag = abs(a.x * nx) + abs(a.y * ny) + abs(a.z * nz);
+        precise double den_mag = abs(d.x * nx) + abs(d.y * ny) + abs(d.z * nz);
+        precise double bound = (num_mag + abs(t64) * den_mag) / abs(den) * double(1.0 / 562949953421312.0)  // 2^-49
+                               + abs(t64) * double(1.0 / 1125899906842624.0);                         // 2^-50
+        err_out = float(bound * 1.0000010000000000LF);
+    }
+    t_out = float(t_seg);
+    t64_out = t_seg;
     precise double bu = v / det;
     precise double bv = w / det;
     u_out = float(bu);
@@ -155,9 +185,11 @@ bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
 #define TRI_UNSURE 2u
 uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin, float tmax,
                             out float t_out, out float u_out, out float v_out, out float e_out) {
-    precise vec3 a = v0 - r.origin;
-    precise vec3 b = v1 - r.origin;
-    precise vec3 c = v2 - r.origin;
+    // The segment frame's terms exist only in kernels that shift (SEGMENT_FRAME,
+    // declared by the includer); elsewhere seg_origin is origin and the rest 0.
+    precise vec3 a = SEGMENT_FRAME ? (v0 - r.seg_origin) - r.seg_lo : v0 - r.origin;
+    precise vec3 b = SEGMENT_FRAME ? (v1 - r.seg_origin) - r.seg_lo : v1 - r.origin;
+    precise vec3 c = SEGMENT_FRAME ? (v2 - r.seg_origin) - r.seg_lo : v2 - r.origin;
     // Shear and scale the vertices into ray space.
     precise float ax = a[r.kx] - r.sx * a[r.kz];
     precise float ay = a[r.ky] - r.sy * a[r.kz];
@@ -183,12 +215,23 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return TRI_MISS;
     } else {
         // Error bounds: |a[kx]| + |sx a[kz]| is the magnitude of ax before the shear cancels.
+        // A shifted origin adds its own error (seg_err, 0 unless shifted).
         precise float aex = abs(a[r.kx]) + abs(r.sx * a[r.kz]);
         precise float aey = abs(a[r.ky]) + abs(r.sy * a[r.kz]);
         precise float bex = abs(b[r.kx]) + abs(r.sx * b[r.kz]);
         precise float bey = abs(b[r.ky]) + abs(r.sy * b[r.kz]);
         precise float cex = abs(c[r.kx]) + abs(r.sx * c[r.kz]);
         precise float cey = abs(c[r.ky]) + abs(r.sy * c[r.kz]);
+        if (SEGMENT_FRAME) {
+            precise float ex = r.seg_err[r.kx] + abs(r.sx * r.seg_err[r.kz]);
+            precise float ey = r.seg_err[r.ky] + abs(r.sy * r.seg_err[r.kz]);
+            aex = aex + ex;
+            aey = aey + ey;
+            bex = bex + ex;
+            bey = bey + ey;
+            cex = cex + ex;
+            cey = cey + ey;
+        }
         // Each sheared coordinate lies within EDGE_GAMMA * m of its exact value (about
         // 5 roundings of 2^-24; EDGE_GAMMA is 32), m the largest magnitude before the
         // shear cancelled. With l the largest |coordinate|, an edge function p q - r s
@@ -223,7 +266,8 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         // A bound on |t - exact t|: the edge functions' errors du_i move t_scaled -
         // t det by sum du_i (z_i - t), and |z_i - t| is at most the spread of the z_i
         // (t is their weighted mean); then the roundings of t_scaled, det and t.
-        precise float t_err = EDGE_GAMMA * (abs(u * az) + abs(v * bz) + abs(w * cz));
+        precise float ez = SEGMENT_FRAME ? (abs(u) + abs(v) + abs(w)) * abs(r.sz * r.seg_err[r.kz]) : 0.0;
+        precise float t_err = EDGE_GAMMA * ((abs(u * az) + abs(v * bz) + abs(w * cz)) + ez);
         precise float weights_err = eu + ev + ew;
         precise float spread = max(max(az, bz), cz) - min(min(az, bz), cz);
         e = (t_err + weights_err * spread + EDGE_GAMMA * abs(t_scaled)) / abs(det) + EDGE_GAMMA * abs(t);
@@ -232,10 +276,11 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         // bound it lies on. |t - b| is exact near b (Sterbenz) and far from it it
         // exceeds e by far, so the f32 difference decides soundly.
         bool near_tmin = !isinf(tmin) && abs(t - tmin) <= e;
-        bool near_tmax = !isinf(r.ray_tmax) && abs(t - r.ray_tmax) <= e;
+        float seg_tmax = SEGMENT_FRAME ? r.seg_tmax : r.ray_tmax;
+        bool near_tmax = !isinf(seg_tmax) && abs(t - seg_tmax) <= e;
         if (near_tmin || near_tmax) return TRI_UNSURE;
     }
-    bool below = t <= tmax || (ROBUST && t - e <= tmax && t <= r.ray_tmax);
+    bool below = t <= tmax || (ROBUST && t - e <= tmax && t <= (SEGMENT_FRAME ? r.seg_tmax : r.ray_tmax));
     if (!(t >= tmin && below)) return TRI_MISS;
     t_out = t;
     e_out = e;

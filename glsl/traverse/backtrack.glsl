@@ -83,7 +83,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
             break;
         }
         if (exit_t <= t0) return true;  // the root's box ends here: nothing left
-        t1 = min(min(exit_t, t1_scene), reach_t(r, best));
+        t1 = min(min(exit_t, t1_scene), best_reach(best));
         t1_plane = t1 == exit_t ? box_face_plane(node, face) : NO_PLANE;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;

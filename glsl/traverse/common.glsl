@@ -10,8 +10,9 @@
 // lies far outside the scene box (see shift_to_scene in trace.comp). There the
 // origin is moved to the box entry, kept as origin + origin_lo (two f32, from
 // f64), so that split decisions carry an error bound in scene space (t_err)
-// instead of one relative to a huge t. Hits (best.t, tmin, tmax, the triangle
-// tests) stay in the ray's own parameter; reach_t converts.
+// instead of one relative to a huge t, and hits (best.t and its bound, the f32
+// triangle test) are in the same frame; tmin and tmax stay the ray's own, and
+// trace.comp converts the hit back when it writes it.
 struct TraceRay {
     WatertightRay wr;
     vec3 origin;     // segment frame origin (the ray's origin when t_shift is 0)
@@ -28,13 +29,19 @@ struct TraceRay {
 // arithmetic with origin_lo = 0 is today's (plane - origin) * inv_dir, bit for bit.
 float plane_t(TraceRay r, uint axis, float plane) {
     precise float shifted = (plane - r.origin[axis]) - r.origin_lo[axis];
-    precise float t = (ROBUST ? shifted : plane - r.origin[axis]) * r.inv_dir[axis];
+    precise float t = (SEGMENT_FRAME ? shifted : plane - r.origin[axis]) * r.inv_dir[axis];
     return t;
 }
 
-// t_err where it applies (robust kernels only; 0 when not shifted).
-float seg_err(TraceRay r) {
-    return ROBUST ? r.t_err : 0.0;
+// x widened down / up by t_err (0 when not shifted) in the kernels with
+// SEGMENT_FRAME (see trace.comp); x itself in the others, at no cost.
+float minus_err(TraceRay r, float x) {
+    precise float y = x - r.t_err;
+    return SEGMENT_FRAME ? y : x;
+}
+float plus_err(TraceRay r, float x) {
+    precise float y = x + r.t_err;
+    return SEGMENT_FRAME ? y : x;
 }
 
 // Per-ray counters (kept even when COUNTERS is off; the compiler drops dead stores).
@@ -67,8 +74,8 @@ uvec2 fetch_node(uint node, inout TraceCounters c) {
 bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
     precise float tmin_seg = r.tmin - r.t_shift;
     precise float tmax_seg = r.tmax - r.t_shift;
-    t0 = ROBUST ? tmin_seg : r.tmin;
-    t1 = ROBUST ? tmax_seg : r.tmax;
+    t0 = SEGMENT_FRAME ? tmin_seg : r.tmin;
+    t1 = SEGMENT_FRAME ? tmax_seg : r.tmax;
     for (uint axis = 0u; axis < 3u; ++axis) {
         float o = r.origin[axis];
         if (r.dir[axis] == 0.0) {
@@ -77,8 +84,9 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
         }
         float ta = plane_t(r, axis, bmin[axis]);
         float tb = plane_t(r, axis, bmax[axis]);
-        precise float tnear = min(ta, tb) - seg_err(r);
-        precise float tfar = max(ta, tb) * 1.0000003576278687 + seg_err(r);
+        float tnear = minus_err(r, min(ta, tb));
+        precise float tfar_rel = max(ta, tb) * 1.0000003576278687;
+        float tfar = plus_err(r, tfar_rel);
         t0 = max(t0, tnear);
         t1 = min(t1, tfar);
     }
@@ -142,10 +150,14 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     // it is the plane the last leaf was left through.
     // The bound is relative to |t| plus, in a shifted segment frame, t_err.
     float eps = ROBUST ? T_EPS : 0.0;
-    precise float ts_lo = ts - eps * abs(ts) - seg_err(r);
-    precise float ts_hi = ts + eps * abs(ts) + seg_err(r);
-    precise float t1_hi = t1 + eps * abs(t1) + seg_err(r);
-    precise float t0_lo = t0 - eps * abs(t0) - seg_err(r);
+    precise float ts_lo_rel = ts - eps * abs(ts);
+    precise float ts_hi_rel = ts + eps * abs(ts);
+    precise float t1_hi_rel = t1 + eps * abs(t1);
+    precise float t0_lo_rel = t0 - eps * abs(t0);
+    float ts_lo = minus_err(r, ts_lo_rel);
+    float ts_hi = plus_err(r, ts_hi_rel);
+    float t1_hi = plus_err(r, t1_hi_rel);
+    float t0_lo = minus_err(r, t0_lo_rel);
     if (ts_lo > t1_hi) return VISIT_NEAR;
     bool far_only;
     if (exit_plane.x == NO_PLANE.x) {
@@ -274,10 +286,10 @@ float best_reach(Hit best) {
     return ROBUST ? best.t + best_err : best.t;
 }
 
-// best_reach in the segment frame (traversal t values).
-float reach_t(TraceRay r, Hit best) {
-    precise float t = best_reach(best) - r.t_shift;
-    return ROBUST ? t : best_reach(best);
+// The ray's tmin in the segment frame (the f32 triangle test's).
+float seg_tmin(TraceRay r) {
+    precise float t = r.tmin - r.t_shift;
+    return SEGMENT_FRAME ? t : r.tmin;
 }
 
 // Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.t);
@@ -313,7 +325,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
         vec3 v0, v1, v2;
         uint prim = load_triangle(offset + i, v0, v1, v2);
         float t, u, v, e;
-        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, best_reach(best), t, u, v, e);
+        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, seg_tmin(r), best_reach(best), t, u, v, e);
         if (result == TRI_HIT) {
             // [t - e, t + e] meets the closest hit's interval: order them in f64 (unless
             // it is the same triangle, met again in another leaf: the same bits).
@@ -358,13 +370,13 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
         vec3 v0, v1, v2;
         uint prim = load_triangle(ref, v0, v1, v2);
         float t, u, v, e;
-        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, r.tmin, window, t, u, v, e);
+        uint result = intersect_triangle_f32(r.wr, v0, v1, v2, seg_tmin(r), window, t, u, v, e);
         bool unsure_pair = result == TRI_UNSURE;
         if (unsure_pair && j >= 0) unsure -= 1u;
         if (!(unsure_pair || (result == TRI_HIT && (j < 0 || (tie && ref != w_ref))))) continue;
-        float t_f64, u_f64, v_f64;
+        float t_f64, u_f64, v_f64, err64;
         double t64;
-        if (!intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, t_f64, u_f64, v_f64, t64)) {
+        if (!intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, t_f64, u_f64, v_f64, t64, err64)) {
             if (unsure_pair) continue;
             t64 = double(t);  // a certain f32 hit the f64 test rejects: keep its f32 t
         }
@@ -373,7 +385,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
             t = t_f64;
             u = u_f64;
             v = v_f64;
-            e = EDGE_GAMMA * abs(t_f64);
+            e = EDGE_GAMMA * abs(t_f64) + err64;
         }
         if (t64 <= bar) {
             bar = t64;
@@ -393,7 +405,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
 uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounters c) {
     c.leaves += 1u;
     if (!intersect_leaf(r, n, best, c)) return LEAF_CUT;
-    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : reach_t(r, best) <= t1;
+    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
     return done ? LEAF_DONE : LEAF_GO_ON;
 }
 
@@ -435,7 +447,8 @@ uvec2 box_face_plane(uint node, uint face) {
 // there (trace_restart_exact with t_from, and push-down), which are watertight.
 bool near_t0(TraceRay r, float ts, float t0) {
     precise float d = abs(ts - t0);
-    precise float bound = T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38) + seg_err(r);
+    precise float bound_rel = T_EPS * min(max(abs(ts), abs(t0)), 3.40282347e38);
+    float bound = plus_err(r, bound_rel);
     return d <= bound;
 }
 

@@ -96,7 +96,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
         if (lane_on) {
             c.leaves += 1u;
             if (!intersect_leaf(r, n, best, c)) complete = false;
-            bool done = ANY_HIT ? best.prim_id != PRIM_MISS : reach_t(r, best) <= t1;
+            bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
             t_done = t1;
             if (done || t1 >= t1_scene) {
                 alive = false;
@@ -106,7 +106,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                         uint slot = (head + size - 1u - k) % size;
                         if (stack_t0[slot] <= stack_t1[slot]) t_gap = min(t_gap, stack_t0[slot]);
                     }
-                    if (!(ANY_HIT && done) && (in_plane || t_gap < reach_t(r, best))) {
+                    if (!(ANY_HIT && done) && (in_plane || t_gap < best_reach(best))) {
                         fallback = true;
                         t_from = in_plane ? -3.40282347e38 : t_gap;
                     }
@@ -147,7 +147,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
         t0 = restart_point(t_done, t0_restart);
         if (alive) t0_restart = t0;
         t_done = t0;
-        t1 = min(t1_scene, reach_t(r, best));
+        t1 = min(t1_scene, best_reach(best));
         if (alive) {
             exit_plane = ANY_PLANE;
             c.restarts += 1u;

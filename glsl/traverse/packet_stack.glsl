@@ -8,10 +8,10 @@
 #define TRAVERSE_PACKET_STACK_GLSL
 
 // True while the lane may still find something in an entry starting at t0.
-bool lane_wants(TraceRay r, bool alive, float t0, float t1, Hit best) {
+bool lane_wants(bool alive, float t0, float t1, Hit best) {
     if (!alive || !(t0 <= t1)) return false;
     if (ANY_HIT) return best.prim_id == PRIM_MISS;
-    float reach = reach_t(r, best);
+    float reach = best_reach(best);
     return t0 < reach || (best.prim_id == PRIM_MISS && t0 <= reach);
 }
 
@@ -72,7 +72,7 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Hit be
             node = stack_node[sp];
             t0 = stack_t0[sp];
             t1 = stack_t1[sp];
-            lane_on = lane_wants(r, alive, t0, t1, best);
+            lane_on = lane_wants(alive, t0, t1, best);
             if (packet_any(lane_on, mask)) break;
         }
         if (!packet_any(lane_on, mask)) return complete && sp == 0u;

@@ -48,7 +48,7 @@ bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = min(t1_scene, reach_t(r, best));
+        t1 = min(t1_scene, best_reach(best));
         node = restart_node;
         push_down = true;
         exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;

@@ -23,7 +23,8 @@
 // `step`: the loop steps already taken.
 bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, float t_from, uint step,
                          inout Hit best, inout TraceCounters c) {
-    precise float t_from_lo = t_from - T_EPS * abs(t_from) - seg_err(r);
+    precise float t_from_lo_rel = t_from - T_EPS * abs(t_from);
+    float t_from_lo = minus_err(r, t_from_lo_rel);
     uint node = 0u;
     uint restart_node = 0u;
     float restart_t0 = t0;
@@ -40,7 +41,7 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
             if (k.seeking) {
-                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, reach_t(r, best));
+                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best_reach(best));
                 if (!k.seeking) {
                     if (!k.found) return true;  // nothing left
                     node = k.next;
@@ -120,7 +121,7 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout T
         // Restart from the root behind this leaf.
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = min(t1_scene, reach_t(r, best));
+        t1 = min(t1_scene, best_reach(best));
         node = 0u;
         exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
         t1_plane = NO_PLANE;

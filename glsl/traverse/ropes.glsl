@@ -66,7 +66,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
         crossed = box_face_plane(node, face);
         // Never step backwards: keep t0 when rounding puts the exit behind it.
         t0 = max(t0, leaf_t1);
-        t1 = min(t1_scene, reach_t(r, best));
+        t1 = min(t1_scene, best_reach(best));
         node = next;
         exit_plane = ANY_PLANE;
         c.restarts += 1u;

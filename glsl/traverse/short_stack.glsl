@@ -38,7 +38,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             float ts;
             uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (ROBUST && k.seeking) {
-                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, reach_t(r, best));
+                node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best_reach(best));
                 if (!k.seeking) {
                     if (!k.found) return true;  // nothing left
                     node = k.next;
@@ -88,7 +88,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             if (ANY_HIT) return true;
             // As in stack.glsl: only entries starting before the hit can hold a
             // closer one (the other side of a split plane the ray lies in).
-            while (count > 0u && !(stack_t0[(head + STACK_SIZE - 1u) % STACK_SIZE] < reach_t(r, best))) {
+            while (count > 0u && !(stack_t0[(head + STACK_SIZE - 1u) % STACK_SIZE] < best_reach(best))) {
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
             }
@@ -114,7 +114,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         if (t1 >= t1_scene) return true;
         t0 = restart_point(t1, t0_restart);
         t0_restart = t0;
-        t1 = min(t1_scene, reach_t(r, best));
+        t1 = min(t1_scene, best_reach(best));
         node = restart_node;
         push_down = use_push_down;
         exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;

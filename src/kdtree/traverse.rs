@@ -290,6 +290,7 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         let mut clipped = clip_to_box(&r, &scene.bounds);
         if let (true, Some((t0, _))) = (traversal.robust, clipped) {
             clipped = shift_to_scene(&mut r, &scene.bounds, t0);
+            best.t = ray.tmax - r.t_shift; // the segment frame, like every hit below
         }
         if let Some((t0, t1)) = clipped {
             let mut s = State { scene, r: &r, best: &mut best, closest: Closest::NONE, c: &mut c };
@@ -307,6 +308,10 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             if !finished {
                 best.prim_id = PRIM_INCOMPLETE;
             }
+        }
+        // Back to the ray's own parameter (one rounding, in f64).
+        if traversal.robust && r.t_shift != 0.0 {
+            best.t = (best.t as f64 + r.t_shift as f64) as f32;
         }
     }
     if best.prim_id >= PRIM_INCOMPLETE {
@@ -352,12 +357,7 @@ impl State<'_, '_> {
     /// The farthest `t` at which the closest hit's exact `t` may lie (`best_reach`
     /// in common.glsl): cells beyond it cannot hold a closer hit.
     fn reach(&self) -> f32 {
-        let reach = self.best.t + self.closest.err;
-        if self.r.robust {
-            reach - self.r.t_shift
-        } else {
-            reach
-        }
+        self.best.t + self.closest.err
     }
 
     /// Tests a leaf; true when traversal is done: an any-hit found one, or the
@@ -407,13 +407,16 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
     let t_shift = t0 as f64;
     let mut hi = Vec3::ZERO;
     let mut lo = Vec3::ZERO;
+    let mut seg_err = Vec3::ZERO;
     let mut e = 0.0f64;
     for axis in 0..3 {
         let (o, d) = (r.origin[axis] as f64, r.dir[axis] as f64);
         let p = o + t_shift * d;
         hi[axis] = p as f32;
-        lo[axis] = (p - hi[axis] as f64) as f32;
+        let rest = p - hi[axis] as f64;
+        lo[axis] = rest as f32;
         let a = (hi[axis] as f64).abs() * 2f64.powi(-45) + (o.abs() + (t_shift * d).abs()) * 2f64.powi(-50);
+        seg_err[axis] = (rest.abs() + a * 2f64.powi(20)) as f32;
         if r.dir[axis] != 0.0 {
             e = e.max(a / d.abs());
         }
@@ -422,6 +425,11 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
     r.origin = hi;
     r.origin_lo = lo;
     r.t_shift = t0;
+    r.wr.seg_origin = hi;
+    r.wr.seg_lo = lo;
+    r.wr.seg_err = seg_err;
+    r.wr.t_shift = t0;
+    r.wr.seg_tmax = r.tmax - t0;
     clip_to_box(r, b)
 }
 
@@ -563,7 +571,7 @@ fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, clo
     let mut tie = false;
     for i in 0..count {
         let (prim, [v0, v1, v2]) = triangle((offset + i) as u32);
-        match r.wr.intersect_f32(v0, v1, v2, r.tmin, best.t + closest.err) {
+        match r.wr.intersect_f32(v0, v1, v2, r.tmin - r.t_shift, best.t + closest.err) {
             TriTest::Hit(t, u, v, e) => {
                 // [t - e, t + e] meets the closest hit's interval: order them in f64
                 // (unless it is the same triangle, met again in another leaf).
@@ -612,7 +620,7 @@ fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, clo
             break;
         }
         let (prim, [v0, v1, v2]) = triangle(reference);
-        let result = r.wr.intersect_f32(v0, v1, v2, r.tmin, window);
+        let result = r.wr.intersect_f32(v0, v1, v2, r.tmin - r.t_shift, window);
         let unsure_pair = result == TriTest::Unsure;
         if unsure_pair && in_leaf {
             unsure -= 1;
@@ -623,10 +631,10 @@ fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, clo
             _ => continue,
         };
         let t64 = match r.wr.intersect_f64(v0, v1, v2, r.tmin) {
-            Some((t, u, v, t64)) => {
+            Some((t, u, v, t64, err64)) => {
                 // An unsure pair takes the f64 answer; a certain f32 hit keeps its f32 values.
                 if unsure_pair {
-                    (hit, e) = (Hit { t, prim_id: prim, u, v }, EDGE_GAMMA * t.abs());
+                    (hit, e) = (Hit { t, prim_id: prim, u, v }, EDGE_GAMMA * t.abs() + err64);
                 }
                 t64
             }

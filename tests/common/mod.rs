@@ -29,6 +29,20 @@ pub fn scene_path(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes").join(name)
 }
 
+/// A scene that `tools/fetch-scenes` provides (bunny, dragon_200k): its path, or
+/// None with a message when it is missing. Under `CI` a missing scene fails the
+/// test: CI must not pass by skipping.
+pub fn fetched_scene(name: &str) -> Option<PathBuf> {
+    let path = scene_path(name);
+    if path.exists() {
+        return Some(path);
+    }
+    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
+    assert!(!ci, "{name} is missing under CI: tools/fetch-scenes must provide it");
+    eprintln!("skipping {name}: not in scenes/ (run tools/fetch-scenes)");
+    None
+}
+
 /// A small seeded generator (xorshift64*), so tests need no extra crate.
 pub struct Rng(pub u64);
 
