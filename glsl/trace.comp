@@ -103,9 +103,22 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     vec3 lo = vec3(rest);
     precise dvec3 a = abs(dvec3(hi)) * double(1.0 / 35184372088832.0)   // 2^-45
                       + (abs(o) + abs(t_shift * d)) * double(1.0 / 1125899906842624.0);  // 2^-50
+    // Flat axes: where a / |d| would exceed T_EPS s_max, s_max a bound on |t| over
+    // the segment in the new frame (the box's span along the ray, from the clip
+    // in the ray's own frame, plus that clip's rounding). There the ray's
+    // coordinate stays within band = a + |d| s_max of hi + lo.
+    precise double s_max = (double(t1) - double(t0)) + double(abs(t1)) * (1.0LF / 1048576.0LF);  // 2^-20
     double e = 0.0LF;
+    r.flat_axes = 0u;
+    r.band = vec3(0.0);
     for (uint axis = 0u; axis < 3u; ++axis) {
-        if (r.dir[axis] != 0.0) e = max(e, a[axis] / abs(d[axis]));
+        if (r.dir[axis] == 0.0) continue;
+        if (a[axis] > double(T_EPS) * s_max * abs(d[axis])) {
+            r.flat_axes |= 1u << axis;
+            r.band[axis] = float((a[axis] + abs(d[axis]) * s_max) * 1.0000010000000000LF);
+        } else {
+            e = max(e, a[axis] / abs(d[axis]));
+        }
     }
     r.t_err = max(float(e * 1.0000010000000000LF), FLT_MIN_NORMAL);
     r.origin = hi;
@@ -202,6 +215,8 @@ void trace_ray(uint index) {
     r.origin_lo = vec3(0.0);
     r.t_shift = 0.0;
     r.t_err = 0.0;
+    r.flat_axes = 0u;
+    r.band = vec3(0.0);
     r.wr = watertight_ray(ray.origin, ray.dir);
     r.wr.ray_tmax = ray.tmax;
     r.wr.seg_tmax = ray.tmax;

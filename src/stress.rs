@@ -54,11 +54,14 @@ pub enum Category {
     /// Huge finite `tmax` (1e30 or `f32::MAX`) toward points on triangles, from
     /// points in the box or 1e5 diagonals away.
     HugeTmax,
+    /// From 1e5 scene diagonals away toward points on triangles, nearly parallel
+    /// to an axis plane: one direction component 1e-3 … 1e-30 of the others.
+    FarGrazing,
 }
 
 impl Category {
     /// Every category, in table order.
-    pub const ALL: [Category; 15] = [
+    pub const ALL: [Category; 16] = [
         Category::Random,
         Category::AxisParallel,
         Category::SplitPlaneOrigin,
@@ -73,6 +76,7 @@ impl Category {
         Category::FarOrigin,
         Category::FarOrigin1e7,
         Category::HugeTmax,
+        Category::FarGrazing,
         Category::DirectionScale,
     ];
 
@@ -93,6 +97,7 @@ impl Category {
             Category::FarOrigin => "far origin 1e5",
             Category::FarOrigin1e7 => "far origin 1e7",
             Category::HugeTmax => "huge tmax",
+            Category::FarGrazing => "far, nearly axis-parallel",
             Category::DirectionScale => "direction scale",
         }
     }
@@ -284,6 +289,13 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                 };
                 let tmax = if s.rng.next_u64() & 1 == 0 { 1e30 } else { f32::MAX };
                 Ray { tmax, ..toward(origin, s.surface_point()) }
+            }
+            Category::FarGrazing => {
+                let target = s.surface_point();
+                let mut dir = s.rng.unit_vector();
+                let axis = s.index(3);
+                dir[axis] = s.sign() * 10f32.powi(-3 - s.index(28) as i32) * dir.abs().max_element();
+                Ray::new(target - dir.normalize() * (1e5 * diagonal), dir.normalize(), 0.0, f32::INFINITY)
             }
             Category::DirectionScale => {
                 let origin = s.box_point();

@@ -23,7 +23,24 @@ struct TraceRay {
     float tmax;
     float t_shift;  // segment t = ray t - t_shift
     float t_err;    // absolute error bound of a segment-frame plane distance
+    // Axes along which a shifted ray moves so little that t_err would span a good
+    // part of the scene (bit per axis): their planes are decided by position
+    // instead, against the band of coordinates the ray may occupy (see
+    // flat_side), and never bound a segment.
+    uint flat_axes;
+    vec3 band;
 };
+
+bool is_flat(TraceRay r, uint axis) {
+    return SEGMENT_FRAME && ((r.flat_axes >> axis) & 1u) != 0u;
+}
+
+// On a flat axis: -1 when the ray stays below `plane` (its whole band of
+// coordinates), +1 when above, 0 when the band reaches the plane.
+int flat_side(TraceRay r, uint axis, float plane) {
+    precise float gap = (plane - r.origin[axis]) - r.origin_lo[axis];
+    return gap > r.band[axis] ? -1 : (gap < -r.band[axis] ? 1 : 0);
+}
 
 // Distance (segment frame) along the ray to the plane `axis` = `plane`. Exact
 // arithmetic with origin_lo = 0 is today's (plane - origin) * inv_dir, bit for bit.
@@ -80,6 +97,10 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
         float o = r.origin[axis];
         if (r.dir[axis] == 0.0) {
             if (o < bmin[axis] || o > bmax[axis]) return false;
+            continue;
+        }
+        if (is_flat(r, axis)) {
+            if (flat_side(r, axis, bmin[axis]) < 0 || flat_side(r, axis, bmax[axis]) > 0) return false;
             continue;
         }
         float ta = plane_t(r, axis, bmin[axis]);
@@ -144,6 +165,15 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
     precise float ts = clamp(plane_t(r, axis, split), -3.40282347e38, 3.40282347e38);
     t_split = ts;
     if (d == 0.0 && o == split) return VISIT_BOTH_SAME;
+    if (is_flat(r, axis)) {
+        // By position: one child when the ray's band lies on one side, else both
+        // with the same segment (no t from this axis enters a segment).
+        int side = flat_side(r, axis, split);
+        if (side == 0) return VISIT_BOTH_SAME;
+        bool wants_near = (side < 0) == below_first;
+        t_split = wants_near ? 3.40282347e38 : -3.40282347e38;
+        return wants_near ? VISIT_NEAR : VISIT_FAR;
+    }
     // Conservative: one child only when the plane lies beyond the segment by more
     // than rounding (Ize 2013 in spirit). After a restart (t0 = a leaf exit) the
     // near side of a plane is skipped when the plane lies before t0, or at t0 and
@@ -413,13 +443,21 @@ uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounte
 // nearest far plane; `face` is 2*axis (+1 for the max face), `t_next` the next
 // far plane (+inf when none). Axes with a zero direction component never end
 // the segment.
+// A flat axis never ends the segment either, but a face of it within the ray's
+// band makes t_next equal t_exit, which sends the callers to their exact fallback.
 float box_exit(TraceRay r, uint node, out uint face, out float t_next) {
     float t_exit = uintBitsToFloat(0x7f800000u);
     t_next = t_exit;
     face = 0u;
+    bool flat_face = false;
     for (uint axis = 0u; axis < 3u; ++axis) {
         float d = r.dir[axis];
         if (d == 0.0) continue;
+        if (is_flat(r, axis)) {
+            flat_face = flat_face || flat_side(r, axis, node_boxes[node * 6u + axis]) == 0 ||
+                        flat_side(r, axis, node_boxes[node * 6u + axis + 3u]) == 0;
+            continue;
+        }
         bool positive = d > 0.0;
         float plane = node_boxes[node * 6u + axis + (positive ? 3u : 0u)];
         float t = plane_t(r, axis, plane);
@@ -431,6 +469,7 @@ float box_exit(TraceRay r, uint node, out uint face, out float t_next) {
             t_next = t;
         }
     }
+    if (flat_face) t_next = t_exit;
     return t_exit;
 }
 

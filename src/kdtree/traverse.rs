@@ -242,6 +242,10 @@ struct TraceRay {
     t_shift: f32,
     /// Absolute error bound of a segment-frame plane distance (0 unless shifted).
     t_err: f32,
+    /// Flat axes (bit per axis) of a shifted ray and the band of coordinates it
+    /// may occupy along them (`flat_axes`, `band` in common.glsl).
+    flat_axes: u32,
+    band: Vec3,
     dir: Vec3,
     inv_dir: Vec3,
     tmin: f32,
@@ -280,6 +284,8 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             origin_lo: Vec3::ZERO,
             t_shift: 0.0,
             t_err: 0.0,
+            flat_axes: 0,
+            band: Vec3::ZERO,
             dir,
             // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
             inv_dir: (Vec3::ONE / dir).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX)),
@@ -288,8 +294,8 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             any_hit: traversal.any_hit,
         };
         let mut clipped = clip_to_box(&r, &scene.bounds);
-        if let (true, Some((t0, _))) = (traversal.robust, clipped) {
-            clipped = shift_to_scene(&mut r, &scene.bounds, t0);
+        if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
+            clipped = shift_to_scene(&mut r, &scene.bounds, t0, t1);
             best.t = ray.tmax - r.t_shift; // the segment frame, like every hit below
         }
         if let Some((t0, t1)) = clipped {
@@ -383,6 +389,23 @@ fn plane_t(r: &TraceRay, axis: usize, plane: f32) -> f32 {
     d * r.inv_dir[axis]
 }
 
+/// `is_flat` in common.glsl.
+fn is_flat(r: &TraceRay, axis: usize) -> bool {
+    r.robust && (r.flat_axes >> axis) & 1 != 0
+}
+
+/// `flat_side` in common.glsl: -1 below `plane`, +1 above, 0 within the band.
+fn flat_side(r: &TraceRay, axis: usize, plane: f32) -> i32 {
+    let gap = (plane - r.origin[axis]) - r.origin_lo[axis];
+    if gap > r.band[axis] {
+        -1
+    } else if gap < -r.band[axis] {
+        1
+    } else {
+        0
+    }
+}
+
 /// `seg_err` in common.glsl: the absolute widening of a robust shifted ray.
 fn seg_err(r: &TraceRay) -> f32 {
     if r.robust {
@@ -395,8 +418,9 @@ fn seg_err(r: &TraceRay) -> f32 {
 /// Twin of `shift_to_scene` in trace.comp: a robust ray from more than
 /// [`SHIFT_DIAGONALS`](crate::consts::SHIFT_DIAGONALS) scene diagonals away is
 /// traversed from its entry `t0` into the box, with the bound `t_err`; returns
-/// the clip there (None: it misses after all).
-fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
+/// the clip there (None: it misses after all). `t0`, `t1`: the clip in the
+/// ray's own frame.
+fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, f32)> {
     let ext = b.max - b.min;
     let diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
     let dist = t0 * glsl_max(r.dir.x.abs(), glsl_max(r.dir.y.abs(), r.dir.z.abs()));
@@ -409,6 +433,8 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
     let mut lo = Vec3::ZERO;
     let mut seg_err = Vec3::ZERO;
     let mut e = 0.0f64;
+    // Flat axes: see trace.comp.
+    let s_max = (t1 as f64 - t0 as f64) + (t1.abs() as f64) * 2f64.powi(-20);
     for axis in 0..3 {
         let (o, d) = (r.origin[axis] as f64, r.dir[axis] as f64);
         let p = o + t_shift * d;
@@ -417,7 +443,13 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32) -> Option<(f32, f32)> {
         lo[axis] = rest as f32;
         let a = (hi[axis] as f64).abs() * 2f64.powi(-45) + (o.abs() + (t_shift * d).abs()) * 2f64.powi(-50);
         seg_err[axis] = (rest.abs() + a * 2f64.powi(20)) as f32;
-        if r.dir[axis] != 0.0 {
+        if r.dir[axis] == 0.0 {
+            continue;
+        }
+        if a > T_EPS as f64 * s_max * d.abs() {
+            r.flat_axes |= 1 << axis;
+            r.band[axis] = ((a + d.abs() * s_max) * 1.000001) as f32;
+        } else {
             e = e.max(a / d.abs());
         }
     }
@@ -440,6 +472,12 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
         let o = r.origin[axis];
         if r.dir[axis] == 0.0 {
             if o < b.min[axis] || o > b.max[axis] {
+                return None;
+            }
+            continue;
+        }
+        if is_flat(r, axis) {
+            if flat_side(r, axis, b.min[axis]) < 0 || flat_side(r, axis, b.max[axis]) > 0 {
                 return None;
             }
             continue;
@@ -541,8 +579,18 @@ fn decide_children(
         ExitPlane::Exact => ts < t0,
         ExitPlane::Plane(a, bits) => ts < t0 || (ts == t0 && a == axis && bits == split.to_bits()),
     };
+    let flat = if is_flat(r, axis) { flat_side(r, axis, split) } else { 2 };
     let (visit, ts) = if d == 0.0 && o == split {
         (Visit::BothSame, ts)
+    } else if flat == 0 {
+        // A flat axis: by position (see common.glsl).
+        (Visit::BothSame, ts)
+    } else if flat != 2 {
+        if (flat < 0) == below_first {
+            (Visit::Near, f32::MAX)
+        } else {
+            (Visit::Far, -f32::MAX)
+        }
     } else if ts_lo > t1_hi {
         (Visit::Near, ts)
     } else if far_only {
@@ -1009,8 +1057,13 @@ fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize, f32) {
     let mut t_exit = f32::INFINITY;
     let mut t_next = f32::INFINITY;
     let mut face = 0usize;
+    let mut flat_face = false;
     for axis in 0..3 {
         if r.dir[axis] == 0.0 {
+            continue;
+        }
+        if is_flat(r, axis) {
+            flat_face = flat_face || flat_side(r, axis, b[axis]) == 0 || flat_side(r, axis, b[axis + 3]) == 0;
             continue;
         }
         let positive = r.dir[axis] > 0.0;
@@ -1023,6 +1076,9 @@ fn box_exit(r: &TraceRay, b: &[f32; 6]) -> (f32, usize, f32) {
         } else if t < t_next {
             t_next = t;
         }
+    }
+    if flat_face {
+        t_next = t_exit;
     }
     (t_exit, face, t_next)
 }
