@@ -57,11 +57,16 @@ pub enum Category {
     /// From 1e5 scene diagonals away toward points on triangles, nearly parallel
     /// to an axis plane: one direction component 1e-3 … 1e-30 of the others.
     FarGrazing,
+    /// Bounded segments toward a point on a triangle (reached at t ≈ 1): `tmax` a
+    /// few ulps before, at or after 1 (some with `tmin` > 0 too), `tmin` a few
+    /// ulps around 1 with `tmax` = +inf, and shadow-ray segments between two
+    /// surface points; from the box or 1e5 diagonals away.
+    BoundedSegment,
 }
 
 impl Category {
     /// Every category, in table order.
-    pub const ALL: [Category; 16] = [
+    pub const ALL: [Category; 17] = [
         Category::Random,
         Category::AxisParallel,
         Category::SplitPlaneOrigin,
@@ -77,6 +82,7 @@ impl Category {
         Category::FarOrigin1e7,
         Category::HugeTmax,
         Category::FarGrazing,
+        Category::BoundedSegment,
         Category::DirectionScale,
     ];
 
@@ -98,6 +104,7 @@ impl Category {
             Category::FarOrigin1e7 => "far origin 1e7",
             Category::HugeTmax => "huge tmax",
             Category::FarGrazing => "far, nearly axis-parallel",
+            Category::BoundedSegment => "bounded segment",
             Category::DirectionScale => "direction scale",
         }
     }
@@ -289,6 +296,26 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                 };
                 let tmax = if s.rng.next_u64() & 1 == 0 { 1e30 } else { f32::MAX };
                 Ray { tmax, ..toward(origin, s.surface_point()) }
+            }
+            Category::BoundedSegment => {
+                let target = s.surface_point();
+                let origin = match s.index(4) {
+                    0 => bounds.center() + s.rng.unit_vector() * (1e5 * diagonal),
+                    _ => s.box_point(),
+                };
+                // One ulp of 1.0 up or down, k times.
+                let near_one = |k: i32| f32::from_bits((1.0f32.to_bits() as i32 + k) as u32);
+                let k = s.index(7) as i32 - 3;
+                match s.index(4) {
+                    0 => Ray { tmax: near_one(k), ..toward(origin, target) },
+                    1 => Ray { tmin: 0.25 * s.rng.next_f32(), tmax: near_one(k), ..toward(origin, target) },
+                    2 => Ray { tmin: near_one(k), ..toward(origin, target) },
+                    // A shadow ray: from one surface point to another, both ends left out.
+                    _ => {
+                        let from = s.surface_point();
+                        Ray::new(from, target - from, 1e-4, 1.0 - 1e-4)
+                    }
+                }
             }
             Category::FarGrazing => {
                 let target = s.surface_point();

@@ -671,9 +671,16 @@ impl Tracer {
                 return;
             };
             // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
-            // recording's careful pass has read it.
+            // recording's passes are done with it: a memory dependency, since the
+            // kernel's binding of the list is writable (synchronization validation
+            // counts the careful pass's use as a write).
             let stage = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT;
-            barrier(stage, vk::AccessFlags::empty(), vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::empty());
+            barrier(
+                stage,
+                vk::AccessFlags::SHADER_WRITE,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::TRANSFER_WRITE,
+            );
             let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
             device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
             barrier(

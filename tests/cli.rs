@@ -347,3 +347,98 @@ fn verify_prints_node_visits_and_exits_0_when_clean() {
     assert!(o.status.success(), "{}{}", out, stderr(&o));
     assert!(out.contains("p99 nodes") && out.contains("far origin 1e7") && out.contains("0 incomplete"), "{out}");
 }
+
+/// `trace` writes exactly the hits the library returns, bit for bit, for a ray
+/// file with invalid rays among hard ones (NaN and infinite origins, zero and NaN
+/// directions, NaN bounds), robust and `--plain`; invalid rays come out as
+/// PRIM_INVALID with t = NaN, and the run exits 0.
+#[test]
+fn trace_hits_equal_the_library_bit_for_bit() {
+    use kdtrace::kdtree::traverse::{Traversal, Variant};
+    use kdtrace::kdtree::{BuildConfig, KdTree};
+    use kdtrace::stress::{stress_rays, Category};
+    use kdtrace::trace::{TraceOptions, Tracer};
+    let path = scene_path("teapot.obj");
+    let scene = kdtrace::scene::Scene::load(&path).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut rays: Vec<kdtrace::Ray> =
+        Category::ALL.iter().flat_map(|&c| stress_rays(c, &scene.triangles, &tree, 40, 5)).collect();
+    let (nan, inf) = (f32::NAN, f32::INFINITY);
+    let o = glam::Vec3::new(0.1, 0.2, 0.3);
+    let invalid = [
+        kdtrace::Ray::new(glam::Vec3::new(nan, 0.0, 0.0), glam::Vec3::X, 0.0, inf),
+        kdtrace::Ray::new(glam::Vec3::new(0.0, inf, 0.0), glam::Vec3::X, 0.0, inf),
+        kdtrace::Ray::new(o, glam::Vec3::ZERO, 0.0, inf),
+        kdtrace::Ray::new(o, glam::Vec3::new(0.0, nan, 1.0), 0.0, inf),
+        kdtrace::Ray::new(o, glam::Vec3::Y, nan, inf),
+        kdtrace::Ray::new(o, glam::Vec3::Y, 0.0, nan),
+    ];
+    for (i, ray) in invalid.iter().enumerate() {
+        rays.insert(i * 97, *ray);
+    }
+    let ray_file = temp("mixed.rays");
+    kdtrace::io::write_rays(&ray_file, &rays).unwrap();
+    let ctx = common::context();
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    for (flag, robust) in [(None, true), (Some("--plain"), false)] {
+        let hit_file = temp("mixed.hits");
+        let mut args =
+            vec!["trace", path.to_str().unwrap(), ray_file.to_str().unwrap(), "-o", hit_file.to_str().unwrap()];
+        args.extend(flag);
+        let o = kdtrace(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(stderr(&o).contains(&format!("{} invalid", invalid.len())), "{}", stderr(&o));
+        let written = kdtrace::io::read_hits(&hit_file).unwrap();
+        let traversal = Traversal { robust, ..Traversal::closest(Variant::Stack) };
+        let library = tracer.trace(&rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+        assert_eq!(written.len(), library.len());
+        for (i, (a, b)) in written.iter().zip(&library).enumerate() {
+            assert!(bytemuck::bytes_of(a) == bytemuck::bytes_of(b), "ray {i} {:?}: file {a:?}, library {b:?}", rays[i]);
+        }
+        for i in 0..invalid.len() {
+            let h = written[i * 97];
+            assert!(h.prim_id == kdtrace::consts::PRIM_INVALID && h.t.is_nan(), "ray {}: {h:?}", i * 97);
+        }
+    }
+    drop(tracer);
+    common::assert_validation_clean(&ctx);
+}
+
+/// `info` lists the device with its subgroup properties.
+#[test]
+fn info_lists_devices() {
+    let o = kdtrace(&["info"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.starts_with("0: ") && out.contains("subgroup size"), "{out}");
+}
+
+/// `subgroups` writes its table, CSV and chart (tiny batches: a smoke test).
+#[test]
+fn subgroups_writes_table_csv_and_chart() {
+    let (csv, png) = (temp("subgroups.csv"), temp("subgroups.png"));
+    let scene = scene_path("cornell_box.obj");
+    let o = kdtrace(&[
+        "subgroups",
+        scene.to_str().unwrap(),
+        "--width",
+        "16",
+        "--height",
+        "8",
+        "--random",
+        "256",
+        "--repeat",
+        "1",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--png",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert!(lines.next().unwrap().starts_with("rays,subgroup_size,traversal,packet_width"));
+    let rows: Vec<&str> = lines.collect();
+    assert!(rows.iter().any(|r| r.starts_with("camera,")) && rows.iter().any(|r| r.starts_with("random,")), "{text}");
+    assert!(image::open(&png).unwrap().width() > 100);
+}

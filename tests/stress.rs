@@ -5,9 +5,10 @@
 //!
 //! Asserted: no serious error anywhere (a missed interior hit, a hit far from
 //! its triangle, an incomplete or wrongly flagged answer); the variants that
-//! follow the stack (exact restarts) return its hits bit for bit; where
-//! `backtrack` or `ropes` names another primitive than the stack and neither is
-//! in the exact tie set, neither answer is serious; agreement with the exact
+//! follow the stack (exact restarts) return its hits bit for bit; every other
+//! variant and packet width (`backtrack`, `ropes`, the packet kernels, the stack
+//! at width 8 included) names the stack's primitive or another member of the
+//! exact tie set (closest hit); agreement with the exact
 //! answer of at least `OVERALL_FLOOR` over all categories and `CATEGORY_FLOOR`
 //! in each, for every variant. Watertightness: no escape with any variant. The
 //! tables are printed (`--nocapture`).
@@ -18,7 +19,7 @@ use std::sync::Arc;
 
 use common::{assert_validation_clean, context, scene_path};
 use glam::Vec3;
-use kdtrace::exact::{judge, Exact};
+use kdtrace::exact::Exact;
 use kdtrace::gpu::GpuContext;
 use kdtrace::kdtree::links::TreeLinks;
 use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
@@ -74,6 +75,30 @@ fn same_bits(a: &Hit, b: &Hit) -> bool {
 fn same_primitive(a: &Hit, b: &Hit, exact: &Exact) -> bool {
     a.prim_id == b.prim_id
         || matches!(exact, Exact::Hit { ties, .. } if ties.contains(&a.prim_id) && ties.contains(&b.prim_id))
+}
+
+/// Each hit names the stack's primitive or another member of the exact tie set.
+fn check_same_primitive(
+    label: &str,
+    category: &str,
+    rays: &[Ray],
+    hits: &[Hit],
+    stack: &[Hit],
+    exacts: &[Exact],
+    failures: &mut Vec<String>,
+) {
+    assert!(rays.len() == hits.len() && hits.len() == stack.len() && stack.len() == exacts.len());
+    let differ: Vec<usize> = (0..rays.len()).filter(|&i| !same_primitive(&hits[i], &stack[i], &exacts[i])).collect();
+    if let Some(&i) = differ.first() {
+        failures.push(format!(
+            "{label} / {category}: {} hits name neither the stack's primitive nor a tie member, e.g. {:?}: {:?} vs stack {:?} (exact {:?})",
+            differ.len(),
+            rays[i],
+            hits[i],
+            stack[i],
+            exacts[i]
+        ));
+    }
 }
 
 /// A shared scene scaled by `scale`, its tree and the tree's links.
@@ -154,17 +179,10 @@ fn stress_scene(
                     if differ > 0 {
                         failures.push(format!("{label} / {}: {differ} hits differ from the stack's", category.name()));
                     }
-                } else if traversal.variant != Variant::Stack {
-                    // Same primitive as the stack, or both in the exact tie set;
-                    // otherwise both answers must be acceptable (grazing at most).
-                    for (((ray, a), b), exact) in rays.iter().zip(&hits).zip(stack).zip(exacts) {
-                        if !same_primitive(a, b, exact) {
-                            let (va, vb) = (judge(triangles, ray, a, exact).0, judge(triangles, ray, b, exact).0);
-                            if va.is_serious() || vb.is_serious() {
-                                failures.push(format!("{label} / {}: {ray:?}: {a:?} vs stack {b:?}", category.name()));
-                            }
-                        }
-                    }
+                } else if traversal != Traversal::closest(Variant::Stack) {
+                    // Every other variant and packet width: the stack's primitive, or
+                    // another member of the exact tie set (the README's claim).
+                    check_same_primitive(&label, category.name(), rays, &hits, stack, exacts, failures);
                 }
                 all.rays += t.rays;
                 for (n, m) in all.counts.iter_mut().zip(t.counts) {
@@ -224,13 +242,14 @@ fn stress_deep_trees_and_far_rays() {
         let (scene, tree, _) = scaled_scene(name, 1.0);
         let triangles = &scene.triangles;
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
-        let batches: Vec<(Category, Vec<Ray>, Vec<Exact>)> = Category::ALL
+        let batches: Vec<Batch> = Category::ALL
             .iter()
             .map(|&c| (c, stress_rays(c, triangles, &tree, rays_per_category, 11)))
             .filter(|(_, r)| !r.is_empty())
             .map(|(c, rays)| {
                 let exacts = exact_answers(triangles, &rays);
-                (c, rays, exacts)
+                let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
+                (c, rays, exacts, stack)
             })
             .collect();
         for traversal in traversals() {
@@ -238,9 +257,12 @@ fn stress_deep_trees_and_far_rays() {
                 let traversal = Traversal { any_hit, ..traversal };
                 let label = format!("{name} {}{}", describe(&traversal), if any_hit { " any-hit" } else { "" });
                 println!("\n{label}\n{}", table_header());
-                for (category, rays, exacts) in &batches {
+                for (category, rays, exacts, stack) in &batches {
                     let hits = tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
                     let t = judge_with(triangles, rays, &hits, exacts, any_hit);
+                    if !any_hit && traversal != Traversal::closest(Variant::Stack) {
+                        check_same_primitive(&label, category.name(), rays, &hits, stack, exacts, &mut failures);
+                    }
                     println!("{}", table_row(category.name(), &t));
                     if t.incomplete > 0 || t.serious() > 0 {
                         failures.push(format!(
@@ -398,4 +420,106 @@ fn closed_meshes_have_no_holes() {
     drop(tracer);
     assert_validation_clean(&ctx);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+// ---- The plain kernels and every short-stack size ---------------------------
+
+/// Floors of the plain kernels (`--plain`: the papers' arithmetic, no robustness
+/// measures) per category, on cornell_box and teapot: the lowest agreement
+/// measured (2026-12-02, 200 rays per category, every plain variant and packet
+/// kernel, both scenes, two seeds) less 10 points, which two seeds showed these
+/// small samples need; 99.5 % where every kernel agreed on every ray (random
+/// rays, direction scales). Lowest measured: axis-parallel 98.5 %, split-plane
+/// origin 96.5, vertex-coord origin 95.5, to vertex 85.0, to edge 89.5, along
+/// edge 90.0, in triangle plane 98.0, on surface 83.0, far 1e3 99.0, far 1e5
+/// 63.5, far 1e7 11.5, huge tmax 87.5, far nearly axis-parallel 70.5, bounded
+/// segment 90.5.
+fn plain_floor(category: Category) -> f64 {
+    match category {
+        Category::Random | Category::DirectionScale => 0.995,
+        Category::AxisParallel | Category::AxisPlane => 0.885,
+        Category::SplitPlaneOrigin => 0.865,
+        Category::FarOrigin1e3 => 0.89,
+        Category::VertexCoordOrigin => 0.855,
+        Category::InTrianglePlane => 0.88,
+        Category::ToVertex => 0.75,
+        Category::ToEdge => 0.795,
+        Category::AlongEdge => 0.8,
+        Category::BoundedSegment => 0.805,
+        Category::HugeTmax => 0.775,
+        Category::OnSurface => 0.73,
+        Category::FarOrigin => 0.535,
+        Category::FarGrazing => 0.605,
+        Category::FarOrigin1e7 => 0.015,
+    }
+}
+
+/// Every plain kernel (each variant, packets of 4 and 8, short-stack sizes 1–8)
+/// against the exact reference with `plain_floor`: no incomplete ray, serious
+/// errors only for rays inside a triangle's plane (at most 2 %). And every
+/// robust short-stack size 1–8 (`short-stack`, `push-down-short-stack`) returns
+/// the stack's hits bit for bit.
+#[test]
+fn plain_kernels_and_every_short_stack_size() {
+    let ctx = context();
+    let mut tracer = None;
+    let mut failures = Vec::new();
+    for name in ["cornell_box.obj", "teapot.obj"] {
+        let (scene, tree, _) = scaled_scene(name, 1.0);
+        let triangles = &scene.triangles;
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
+        let batches: Vec<Batch> = Category::ALL
+            .iter()
+            .map(|&c| (c, stress_rays(c, triangles, &tree, 200, 13)))
+            .filter(|(_, r)| !r.is_empty())
+            .map(|(c, rays)| {
+                let exacts = exact_answers(triangles, &rays);
+                let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
+                (c, rays, exacts, stack)
+            })
+            .collect();
+        let mut plain: Vec<Traversal> = traversals();
+        for size in 1..=8 {
+            for variant in [Variant::ShortStack, Variant::PushDownShortStack] {
+                plain.push(Traversal { stack_size: size, ..Traversal::closest(variant) });
+            }
+        }
+        for traversal in plain {
+            // Robust short stacks of every size: the stack's hits, bit for bit.
+            if traversal.variant.uses_short_stack() && traversal.packet_width == 1 {
+                for (category, rays, _, stack) in &batches {
+                    let hits = tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+                    let differ = hits.iter().zip(stack).filter(|(a, b)| !same_bits(a, b)).count();
+                    if differ > 0 {
+                        failures.push(format!(
+                            "{name} {} / {}: {differ} differ",
+                            describe(&traversal),
+                            category.name()
+                        ));
+                    }
+                }
+            }
+            let traversal = Traversal { robust: false, ..traversal };
+            let label = format!("{name} {} plain", describe(&traversal));
+            for (category, rays, exacts, _) in &batches {
+                let hits = tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+                let t = judge_with(triangles, rays, &hits, exacts, false);
+                let serious_allowed = if *category == Category::InTrianglePlane { t.rays / 50 } else { 0 };
+                if t.incomplete > 0 || t.serious() > serious_allowed || t.agreement() < plain_floor(*category) {
+                    failures.push(format!(
+                        "{label} / {}: agreement {:.4} (floor {}), {} serious, {} incomplete: {:?}",
+                        category.name(),
+                        t.agreement(),
+                        plain_floor(*category),
+                        t.serious(),
+                        t.incomplete,
+                        t.serious_examples
+                    ));
+                }
+            }
+        }
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
+    assert!(failures.is_empty(), "{} failures:\n{}", failures.len(), failures.join("\n"));
 }

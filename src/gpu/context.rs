@@ -258,11 +258,27 @@ impl GpuContext {
         let app_info =
             vk::ApplicationInfo::default().application_name(&app_name).engine_name(&app_name).api_version(api_version);
         let layer_names: Vec<*const i8> = if validation { vec![VALIDATION_LAYER.as_ptr()] } else { vec![] };
-        let ext_names: Vec<*const i8> = if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
-        let create_info = vk::InstanceCreateInfo::default()
+        let mut ext_names: Vec<*const i8> =
+            if validation { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        // Synchronization validation too, where the layer offers it: hazards between
+        // kdtrace's own passes (and a caller's recordings) are then reported.
+        // SAFETY: a query of the loader with a valid layer name.
+        let sync_validation = validation
+            && unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+                .map(|exts| exts.iter().any(|e| e.extension_name_as_c_str() == Ok(ash::ext::validation_features::NAME)))
+                .unwrap_or(false);
+        if sync_validation {
+            ext_names.push(ash::ext::validation_features::NAME.as_ptr());
+        }
+        let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+        let mut create_info = vk::InstanceCreateInfo::default()
             .application_info(&app_info)
             .enabled_layer_names(&layer_names)
             .enabled_extension_names(&ext_names);
+        if sync_validation {
+            create_info = create_info.push_next(&mut features);
+        }
         // SAFETY: the create info and the strings it points to live until the call returns.
         let instance = unsafe { entry.create_instance(&create_info, None) }.vk("vkCreateInstance")?;
 
