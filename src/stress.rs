@@ -4,9 +4,11 @@
 //!
 //! Each [`Category`] aims at one of the numerical pitfalls of kd-tree ray
 //! tracing: rays through vertices and edges, along edges, inside triangle
-//! planes and split planes, leaving surfaces, from very far away, exactly
-//! axis-parallel with signed zeros and denormals, and with direction lengths
-//! from 1e-15 to 1e15. Every batch is seeded and reproducible.
+//! planes and split planes, leaving surfaces, from 1e3 to 1e7 scene diagonals
+//! away (also nearly parallel to an axis plane), exactly axis-parallel with
+//! signed zeros and denormals, bounded segments ending within ulps of a hit,
+//! huge finite `tmax`, and direction lengths from 1e-15 to 1e15. Every batch is
+//! seeded and reproducible.
 
 use glam::Vec3;
 use rayon::prelude::*;
