@@ -245,7 +245,8 @@ struct BenchArgs {
     /// Builder settings: default, pbrt-v3, wald-havran.
     #[arg(long, default_value = "default,pbrt-v3,wald-havran")]
     builders: String,
-    /// Ray kinds: camera, shadow, reflection, diffuse, random.
+    /// Ray kinds: camera, shadow, reflection, diffuse, random, hard (the stress
+    /// categories of `verify`, 64 rays each).
     #[arg(long, default_value = "camera,shadow,reflection,diffuse,random")]
     kinds: String,
     /// CPU-twin traversals (rayon over rays), same syntax as --traversals; `none` for none.

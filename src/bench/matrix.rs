@@ -227,6 +227,13 @@ fn make_batches(scene: &Scene, tree: &KdTree, camera: &Camera, options: &MatrixO
             let rays = match kind {
                 RayKind::Camera => camera_rays.clone(),
                 RayKind::Random => crate::raygen::random_rays(&scene.bounds, options.random, options.seed),
+                RayKind::Hard => crate::stress::Category::ALL
+                    .iter()
+                    .flat_map(|&c| {
+                        let per = crate::bench::rays::HARD_PER_CATEGORY;
+                        crate::stress::stress_rays(c, &scene.triangles, tree, per, options.seed)
+                    })
+                    .collect(),
                 _ => secondary_rays(kind, &scene.triangles, &scene.bounds, &camera_rays, &first_hits, options.seed),
             };
             let count = options.reference_sample.min(rays.len());

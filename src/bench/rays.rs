@@ -31,12 +31,19 @@ pub enum RayKind {
     Diffuse,
     /// Uniform origins in the scene box, uniform directions.
     Random,
+    /// The hard rays of `kdtrace verify`: every [`crate::stress::Category`],
+    /// [`HARD_PER_CATEGORY`] rays each (where the scene has such rays), so that
+    /// the error axis shows what the robustness measures buy.
+    Hard,
 }
+
+/// Rays per stress category in [`RayKind::Hard`].
+pub const HARD_PER_CATEGORY: usize = 64;
 
 impl RayKind {
     /// Every kind, in table order.
-    pub const ALL: [RayKind; 5] =
-        [RayKind::Camera, RayKind::Shadow, RayKind::Reflection, RayKind::Diffuse, RayKind::Random];
+    pub const ALL: [RayKind; 6] =
+        [RayKind::Camera, RayKind::Shadow, RayKind::Reflection, RayKind::Diffuse, RayKind::Random, RayKind::Hard];
 
     /// The name used on the command line and in tables.
     pub fn name(self) -> &'static str {
@@ -46,6 +53,7 @@ impl RayKind {
             RayKind::Reflection => "reflection",
             RayKind::Diffuse => "diffuse",
             RayKind::Random => "random",
+            RayKind::Hard => "hard",
         }
     }
 
@@ -138,7 +146,7 @@ pub fn secondary_rays(
                 let d = s * local.x + t * local.y + normal * local.z;
                 rays.push(Ray::new(origin, d, 0.0, f32::INFINITY));
             }
-            RayKind::Camera | RayKind::Random => {}
+            RayKind::Camera | RayKind::Random | RayKind::Hard => {}
         }
     }
     rays
