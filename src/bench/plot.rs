@@ -84,20 +84,62 @@ fn wrap(path: &Path, r: DrawResult) -> Result<()> {
     r.map_err(|e| Error::InvalidInput(format!("{}: drawing the chart failed: {e}", path.display())))
 }
 
+/// Who traced a point of the time-vs-error chart, and with which arithmetic.
+#[derive(Clone, Copy, PartialEq)]
+enum Family {
+    GpuRobust,
+    GpuPlain,
+    Cpu,
+    Embree,
+}
+
+impl Family {
+    const ALL: [Family; 4] = [Family::GpuRobust, Family::GpuPlain, Family::Cpu, Family::Embree];
+
+    fn of(c: &Cell) -> Family {
+        match c.backend {
+            Backend::Gpu if c.traversal.map_or(true, |t| t.robust) => Family::GpuRobust,
+            Backend::Gpu => Family::GpuPlain,
+            Backend::Cpu => Family::Cpu,
+            Backend::Embree => Family::Embree,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Family::GpuRobust => "kdtrace GPU, robust (default)",
+            Family::GpuPlain => "kdtrace GPU, --plain",
+            Family::Cpu => "kdtrace CPU twin",
+            Family::Embree => "Embree",
+        }
+    }
+
+    fn color(self) -> RGBColor {
+        match self {
+            Family::GpuRobust => backend_color(Backend::Gpu),
+            Family::GpuPlain => RGBColor(255, 127, 14),
+            Family::Cpu => backend_color(Backend::Cpu),
+            Family::Embree => backend_color(Backend::Embree),
+        }
+    }
+}
+
 /// One point per setting: nanoseconds per ray (trace time summed over the ray
 /// kinds ÷ their rays) against the disagreement with the exact reference (%,
-/// over all kinds' samples); the Pareto front (no other point both faster and
-/// more accurate) joined by a line.
+/// over all kinds' samples), coloured by who traced it (robust and plain GPU
+/// kernels apart); the Pareto front (no other point both faster and more
+/// accurate) joined by a line, and only its points labelled. Include the `hard`
+/// ray kind to see what the robustness measures buy.
 pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
     let scenes = scenes(cells);
     let draw = || -> DrawResult {
-        let root = BitMapBackend::new(path, (1400, 700 * scenes.len().max(1) as u32 + 40)).into_drawing_area();
+        let root = BitMapBackend::new(path, (1100, 420 * scenes.len().max(1) as u32 + 40)).into_drawing_area();
         root.fill(&WHITE)?;
         let (header, body) = root.split_vertically(40);
         header.titled(title, ("sans-serif", 20))?;
         for (area, scene) in body.split_evenly((scenes.len().max(1), 1)).iter().zip(&scenes) {
             let group: Vec<&Cell> = cells.iter().filter(|c| &c.scene == scene).collect();
-            let points: Vec<(String, Backend, f64, f64)> = labels(&group)
+            let points: Vec<(String, Family, f64, f64)> = labels(&group)
                 .into_iter()
                 .map(|label| {
                     let mine: Vec<&&Cell> = group.iter().filter(|c| c.label() == label).collect();
@@ -106,7 +148,7 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
                     let sample: usize = mine.iter().map(|c| c.tally.rays).sum();
                     let wrong: usize = mine.iter().map(|c| c.disagreeing()).sum();
                     let error = 100.0 * wrong as f64 / sample.max(1) as f64;
-                    (label, mine[0].backend, 1e9 * seconds / rays.max(1) as f64, error)
+                    (label, Family::of(mine[0]), 1e9 * seconds / rays.max(1) as f64, error)
                 })
                 .collect();
             let x_max = points.iter().map(|p| p.2).fold(0.0, f64::max).max(1e-3) * 1.5;
@@ -120,30 +162,33 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
                 .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)?;
             chart
                 .configure_mesh()
+                .light_line_style(WHITE) // no minor grid: a lighter, smaller PNG
                 .x_desc("trace ns per ray (median, log scale)")
                 .y_desc("rays disagreeing with the exact reference, %")
                 .draw()?;
             let front = pareto_front(points.iter().map(|p| (p.2, p.3)).collect());
             chart
-                .draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?
-                .label("Pareto front")
+                .draw_series(LineSeries::new(front.clone(), BLACK.stroke_width(1)))?
+                .label("Pareto front (labelled)")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(1)));
-            for backend in [Backend::Gpu, Backend::Cpu, Backend::Embree] {
-                let color = backend_color(backend);
-                let mine: Vec<&(String, Backend, f64, f64)> = points.iter().filter(|p| p.1 == backend).collect();
+            for family in Family::ALL {
+                let color = family.color();
+                let mine: Vec<&(String, Family, f64, f64)> = points.iter().filter(|p| p.1 == family).collect();
                 if mine.is_empty() {
                     continue;
                 }
                 chart
                     .draw_series(mine.iter().map(|p| Circle::new((p.2, p.3), 4, color.filled())))?
-                    .label(backend.name())
+                    .label(family.name())
                     .legend(move |(x, y)| Circle::new((x + 8, y), 4, color.filled()));
-                // Labels staggered over five lines so that equal errors stay readable.
-                chart.draw_series(mine.iter().enumerate().map(|(i, p)| {
-                    let font = ("sans-serif", 10).into_font().color(&color);
-                    EmptyElement::at((p.2, p.3)) + Text::new(p.0.clone(), (4, -8 - 11 * (i as i32 % 5)), font)
-                }))?;
             }
+            // Labels on the front only, staggered so that equal errors stay readable.
+            let on_front: Vec<&(String, Family, f64, f64)> =
+                points.iter().filter(|p| front.iter().any(|f| f.0 == p.2 && f.1 == p.3)).collect();
+            chart.draw_series(on_front.iter().enumerate().map(|(i, p)| {
+                let font = ("sans-serif", 11).into_font().color(&p.1.color());
+                EmptyElement::at((p.2, p.3)) + Text::new(p.0.clone(), (4, -8 - 12 * (i as i32 % 3)), font)
+            }))?;
             chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
         }
         root.present()?;
