@@ -161,6 +161,7 @@ fn counters_csv_heatmap_and_any_hit() {
         kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap(), "--any-hit"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let any = kdtrace::io::read_hits(&hits).unwrap();
+    assert_eq!(closest.len(), any.len());
     assert!(
         closest.iter().zip(&any).all(|(c, a)| c.is_hit() == a.is_hit()),
         "any-hit finds a hit exactly when one exists"

@@ -192,6 +192,7 @@ fn chunked_tracing_gives_the_same_hits() {
     tracer.set_chunk_size(777);
     assert_eq!(tracer.chunk_size(), 777);
     let chunked = tracer.trace(&rays, &TraceOptions::default()).unwrap();
+    assert_eq!(whole.hits.len(), chunked.hits.len());
     assert!(whole.hits.iter().zip(&chunked.hits).all(|(a, b)| same_bits(a, b)));
     assert!(whole.gpu_seconds.is_some_and(|s| s > 0.0), "lavapipe has timestamps");
     drop(tracer);

@@ -37,6 +37,7 @@ fn check_scene(tracer: &mut Tracer, tree: &KdTree, scene: &Scene, rays: &[Ray], 
                 let traversal = Traversal { packet_width, ..single };
                 let result = tracer.trace(rays, &TraceOptions { traversal, counters: true }).unwrap();
                 let mut ties = 0;
+                assert_eq!(result.hits.len(), reference.len());
                 for (i, (p, s)) in result.hits.iter().zip(&reference).enumerate() {
                     check_hit(scene, &rays[i], p, s, any_hit, &mut ties)
                         .unwrap_or_else(|why| panic!("{name} {traversal:?} ray {i} {:?}: {why}", rays[i]));

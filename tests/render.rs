@@ -73,6 +73,7 @@ fn write_failure_images(name: &str, out: &RenderOutput, expected: Option<&[Vec3]
     kdtrace::render::save_exr(&dir.join(format!("{name}-actual.exr")), &out.pixels, out.width, out.height).unwrap();
     let mut written = actual.display().to_string();
     if let Some(expected) = expected {
+        assert_eq!(out.pixels.len(), expected.len(), "image sizes differ");
         let diff: Vec<Vec3> = out.pixels.iter().zip(expected).map(|(a, e)| (*a - *e).abs()).collect();
         let path = dir.join(format!("{name}-difference.png"));
         kdtrace::render::tone_map(&diff, out.width, out.height, exposure * 4.0).save(&path).unwrap();
@@ -193,6 +194,7 @@ fn a_mirror_shows_the_pattern_it_faces() {
             checked += 1;
         }
     }
+    assert_eq!(out.pixels.len(), expected.len());
     for (i, (a, e)) in out.pixels.iter().zip(&expected).enumerate() {
         if (*a - *e).abs().max_element() > 1e-5 * e.max_element().max(1.0) {
             wrong.push((i as u32 % w, i as u32 / w, *a, *e));
@@ -350,6 +352,7 @@ fn skipping_what_the_scene_does_not_need_changes_only_the_cost() {
         "{} shadow rays for {hits} hit pixels",
         full.stats.shadow_rays
     );
+    assert_eq!(skipped.pixels.len(), full.pixels.len());
     let differ =
         skipped.pixels.iter().zip(&full.pixels).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-6).count();
     assert_eq!(differ, 0, "{differ} pixels differ between skipping and not skipping");
@@ -484,6 +487,7 @@ fn rasterized_first_hits_agree_with_traced_ones() {
         let (a, b) = (traced.first_hits.unwrap(), rastered.first_hits.unwrap());
         let mut ties = 0;
         let mut far_apart: Vec<(usize, Hit, Hit, f64)> = Vec::new();
+        assert_eq!(a.len(), b.len());
         for (i, (ta, rb)) in a.iter().zip(&b).enumerate() {
             if ta.prim_id == rb.prim_id {
                 // Both found this triangle with the same watertight test on the same ray.

@@ -175,6 +175,7 @@ fn stress_scene(
                 }
                 if traversal.follows_stack() {
                     // Exact restarts visit the stack's leaves in its order: its hits, bit for bit.
+                    assert_eq!(hits.len(), stack.len());
                     let differ = hits.iter().zip(stack).filter(|(a, b)| !same_bits(a, b)).count();
                     if differ > 0 {
                         failures.push(format!("{label} / {}: {differ} hits differ from the stack's", category.name()));
@@ -489,6 +490,7 @@ fn plain_kernels_and_every_short_stack_size() {
             if traversal.variant.uses_short_stack() && traversal.packet_width == 1 {
                 for (category, rays, _, stack) in &batches {
                     let hits = tracer.trace(rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+                    assert_eq!(hits.len(), stack.len());
                     let differ = hits.iter().zip(stack).filter(|(a, b)| !same_bits(a, b)).count();
                     if differ > 0 {
                         failures.push(format!(

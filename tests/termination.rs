@@ -179,6 +179,7 @@ fn driver_loop_cut_off_is_reported_not_silent() {
     if incomplete.is_empty() {
         assert!(!lavapipe, "lavapipe 22.x cuts loops at 65535 passes: expected an incomplete ray");
         let cpu = SceneRef::new(&tree, &scene.triangles);
+        assert_eq!(rays.len(), result.hits.len());
         for (ray, hit) in rays.iter().zip(&result.hits) {
             assert_eq!(*hit, trace_ray(&cpu, ray, Variant::Stack).0);
         }

@@ -124,21 +124,25 @@ impl Family {
     }
 }
 
-/// One point per setting: nanoseconds per ray (trace time summed over the ray
-/// kinds ÷ their rays) against the disagreement with the exact reference (%,
-/// over all kinds' samples), coloured by who traced it (robust and plain GPU
-/// kernels apart); the Pareto front (no other point both faster and more
-/// accurate) joined by a line, and only its points labelled. Include the `hard`
-/// ray kind to see what the robustness measures buy.
+/// One panel per scene and ray kind (rows and columns), one point per setting:
+/// nanoseconds per ray against the disagreement with the exact reference (% of
+/// the judged sample), coloured by who traced it (robust and plain GPU kernels
+/// apart); the Pareto front (no other point both faster and more accurate)
+/// joined by a line, and only its points labelled. Include the `hard` ray kind
+/// to see what the robustness measures buy.
 pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
     let scenes = scenes(cells);
+    let kinds: Vec<RayKind> = RayKind::ALL.into_iter().filter(|k| cells.iter().any(|c| c.kind == *k)).collect();
+    let panels: Vec<(&String, RayKind)> = scenes.iter().flat_map(|s| kinds.iter().map(move |&k| (s, k))).collect();
+    let (rows, columns) = (scenes.len().max(1), kinds.len().max(1));
     let draw = || -> DrawResult {
-        let root = BitMapBackend::new(path, (1100, 420 * scenes.len().max(1) as u32 + 40)).into_drawing_area();
+        let width = if columns > 1 { 480 * columns as u32 } else { 1000 };
+        let root = BitMapBackend::new(path, (width, 290 * rows as u32 + 40)).into_drawing_area();
         root.fill(&WHITE)?;
         let (header, body) = root.split_vertically(40);
         header.titled(title, ("sans-serif", 20))?;
-        for (area, scene) in body.split_evenly((scenes.len().max(1), 1)).iter().zip(&scenes) {
-            let group: Vec<&Cell> = cells.iter().filter(|c| &c.scene == scene).collect();
+        for (i, (area, (scene, kind))) in body.split_evenly((rows, columns)).iter().zip(&panels).enumerate() {
+            let group: Vec<&Cell> = cells.iter().filter(|c| &c.scene == *scene && c.kind == *kind).collect();
             let points: Vec<(String, Family, f64, f64)> = labels(&group)
                 .into_iter()
                 .map(|label| {
@@ -155,7 +159,7 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
             let x_min = points.iter().map(|p| p.2).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / 1.5;
             let y_max = points.iter().map(|p| p.3).fold(0.0, f64::max).max(0.1) * 1.15;
             let mut chart = ChartBuilder::on(area)
-                .caption(format!("{scene}: time vs error (all ray kinds)"), ("sans-serif", 16))
+                .caption(format!("{scene}, {kind} rays: time vs error"), ("sans-serif", 16))
                 .margin(15)
                 .x_label_area_size(35)
                 .y_label_area_size(60)
@@ -163,6 +167,8 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
             chart
                 .configure_mesh()
                 .light_line_style(WHITE) // no minor grid: a lighter, smaller PNG
+                .x_labels(4)
+                .y_labels(6)
                 .x_desc("trace ns per ray (median, log scale)")
                 .y_desc("rays disagreeing with the exact reference, %")
                 .draw()?;
@@ -189,7 +195,10 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
                 let font = ("sans-serif", 11).into_font().color(&p.1.color());
                 EmptyElement::at((p.2, p.3)) + Text::new(p.0.clone(), (4, -8 - 12 * (i as i32 % 3)), font)
             }))?;
-            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+            // The legend once, in the first panel (the same in every one).
+            if i == 0 {
+                chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+            }
         }
         root.present()?;
         Ok(())
