@@ -275,7 +275,7 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
 ///
 /// # Safety
 /// `cmd` is recording outside a render pass.
-unsafe fn compute_barrier(device: &ash::Device, cmd: vk::CommandBuffer, dst_access: vk::AccessFlags) {
+pub unsafe fn compute_barrier(device: &ash::Device, cmd: vk::CommandBuffer, dst_access: vk::AccessFlags) {
     let barrier =
         vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(dst_access);
     // SAFETY: forwarded from the caller.

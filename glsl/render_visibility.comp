@@ -45,7 +45,6 @@ void main() {
         Ray ray = rays[i];
         WatertightRay wr = watertight_ray(ray.origin, ray.dir);
         wr.ray_tmax = ray.tmax;
-        wr.seg_tmax = ray.tmax;
         float t, u, v, e, err64;
         double t64;
         uint result = intersect_triangle_f32(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v, e);

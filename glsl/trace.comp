@@ -94,7 +94,7 @@ bool ray_is_valid(Ray ray) {
 bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     vec3 bmin = params.scene_min.xyz;
     vec3 bmax = params.scene_max.xyz;
-    dvec3 o = dvec3(r.origin);
+    dvec3 o = dvec3(r.wr.origin);
     dvec3 d = dvec3(r.dir);
     double t_shift = double(t0);
     precise dvec3 p = o + t_shift * d;
@@ -121,9 +121,6 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
         }
     }
     r.t_err = max(float(e * 1.0000010000000000LF), FLT_MIN_NORMAL);
-    r.origin = hi;
-    r.origin_lo = lo;
-    r.t_shift = t0;
     r.wr.seg_origin = hi;
     r.wr.seg_lo = lo;
     r.wr.seg_err = vec3(abs(rest) + a * 1048576.0LF);  // 2^20
@@ -206,14 +203,11 @@ void trace_ray(uint index) {
     ray.dir = mix(ray.dir, signed_zero, lessThan(abs(ray.dir), vec3(FLT_MIN_NORMAL)));
     bool valid = ray_is_valid(ray);
     TraceRay r;
-    r.origin = ray.origin;
     r.dir = ray.dir;
     // Clamped so that a plane through the origin gives t = 0, never 0 * inf = NaN.
     r.inv_dir = clamp(1.0 / ray.dir, vec3(-FLT_MAX), vec3(FLT_MAX));
     r.tmin = ray.tmin;
     r.tmax = ray.tmax;
-    r.origin_lo = vec3(0.0);
-    r.t_shift = 0.0;
     r.t_err = 0.0;
     r.flat_axes = 0u;
     r.band = vec3(0.0);
@@ -225,7 +219,7 @@ void trace_ray(uint index) {
     bool far = ROBUST && alive && is_far(r, t0);
     if (SEGMENT_FRAME && far) {
         alive = shift_to_scene(r, t0, t1);
-        precise float best_seg = ray.tmax - r.t_shift;
+        precise float best_seg = ray.tmax - r.wr.t_shift;
         best.t = best_seg;  // the segment frame, like every hit below
     }
     // The fast pass leaves far rays to the careful one (without tracing them).
@@ -254,7 +248,7 @@ void trace_ray(uint index) {
     }
     if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
     // Back to the ray's own parameter (one rounding, in f64).
-    if (SEGMENT_FRAME && r.t_shift != 0.0) best.t = float(double(best.t) + double(r.t_shift));
+    if (SEGMENT_FRAME && r.wr.t_shift != 0.0) best.t = float(double(best.t) + double(r.wr.t_shift));
     if (best.prim_id >= PRIM_INCOMPLETE) {
         best.t = best.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
         best.u = 0.0;

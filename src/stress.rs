@@ -324,7 +324,8 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                 let mut dir = s.rng.unit_vector();
                 let axis = s.index(3);
                 dir[axis] = s.sign() * 10f32.powi(-3 - s.index(28) as i32) * dir.abs().max_element();
-                Ray::new(target - dir.normalize() * (1e5 * diagonal), dir.normalize(), 0.0, f32::INFINITY)
+                let dir = dir.normalize();
+                Ray::new(target - dir * (1e5 * diagonal), dir, 0.0, f32::INFINITY)
             }
             Category::DirectionScale => {
                 let origin = s.box_point();
@@ -412,7 +413,7 @@ pub fn judge_with(triangles: &[[Vec3; 3]], rays: &[Ray], hits: &[Hit], exacts: &
             }
         })
         .collect();
-    let incomplete = hits.iter().filter(|h| h.prim_id == crate::consts::PRIM_INCOMPLETE).count();
+    let incomplete = crate::trace::incomplete_rays(hits).len();
     let mut tally = Tally { rays: rays.len(), incomplete, ..Tally::default() };
     for (i, (v, err)) in verdicts.into_iter().enumerate() {
         tally.counts[Verdict::ALL.iter().position(|&x| x == v).expect("a verdict")] += 1;

@@ -42,6 +42,21 @@ const OVERALL_FLOOR: f64 = 0.995;
 /// One category's rays, their exact answers and the stack's hits.
 type Batch = (Category, Vec<Ray>, Vec<Exact>, Vec<Hit>);
 
+/// `per_category` rays of every category the scene has (seeded), with their
+/// exact answers and the GPU stack's hits.
+fn batches(tracer: &mut Tracer, triangles: &[[Vec3; 3]], tree: &KdTree, per_category: usize, seed: u64) -> Vec<Batch> {
+    Category::ALL
+        .iter()
+        .map(|&c| (c, stress_rays(c, triangles, tree, per_category, seed)))
+        .filter(|(_, rays)| !rays.is_empty())
+        .map(|(c, rays)| {
+            let exacts = exact_answers(triangles, &rays);
+            let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
+            (c, rays, exacts, stack)
+        })
+        .collect()
+}
+
 fn traversals() -> Vec<Traversal> {
     let mut all: Vec<Traversal> = Variant::ALL.iter().map(|&v| Traversal::closest(v)).collect();
     all.push(Traversal { stack_size: 1, ..Traversal::closest(Variant::PushDownShortStack) });
@@ -135,17 +150,7 @@ fn stress_scene(
     let (scene, tree, links) = scaled_scene(name, scale);
     let triangles = &scene.triangles;
     let tracer = common::load_scene(tracer, ctx, &tree, triangles);
-    let batches: Vec<Batch> = Category::ALL
-        .iter()
-        .map(|&c| stress_rays(c, triangles, &tree, RAYS, 7))
-        .zip(Category::ALL)
-        .filter(|(r, _)| !r.is_empty())
-        .map(|(rays, c)| {
-            let exacts = exact_answers(triangles, &rays);
-            let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
-            (c, rays, exacts, stack)
-        })
-        .collect();
+    let batches = batches(tracer, triangles, &tree, RAYS, 7);
     for traversal in traversals() {
         for gpu in [true, false] {
             if !gpu && traversal != Traversal::closest(Variant::Stack) && traversal.variant != Variant::Ropes {
@@ -186,6 +191,7 @@ fn stress_scene(
                     check_same_primitive(&label, category.name(), rays, &hits, stack, exacts, failures);
                 }
                 all.rays += t.rays;
+                all.incomplete += t.incomplete;
                 for (n, m) in all.counts.iter_mut().zip(t.counts) {
                     *n += m;
                 }
@@ -212,6 +218,7 @@ fn stress_scene(
                 ));
             }
             shadow.rays += t.rays;
+            shadow.incomplete += t.incomplete;
             for (n, m) in shadow.counts.iter_mut().zip(t.counts) {
                 *n += m;
             }
@@ -243,16 +250,7 @@ fn stress_deep_trees_and_far_rays() {
         let (scene, tree, _) = scaled_scene(name, 1.0);
         let triangles = &scene.triangles;
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
-        let batches: Vec<Batch> = Category::ALL
-            .iter()
-            .map(|&c| (c, stress_rays(c, triangles, &tree, rays_per_category, 11)))
-            .filter(|(_, r)| !r.is_empty())
-            .map(|(c, rays)| {
-                let exacts = exact_answers(triangles, &rays);
-                let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
-                (c, rays, exacts, stack)
-            })
-            .collect();
+        let batches = batches(tracer, triangles, &tree, rays_per_category, 11);
         for traversal in traversals() {
             for any_hit in [false, true] {
                 let traversal = Traversal { any_hit, ..traversal };
@@ -300,11 +298,31 @@ fn stress_rays_gpu_equals_cpu_twin() {
     let mut failures = Vec::new();
     let ctx = context();
     let mut tracer = None;
-    for (name, scale) in [("teapot.obj", 1.0f32), ("teapot.obj", 1e5), ("cornell_box.obj", 1.0)] {
+    // Every category on the small scenes; on bunny's deep tree the categories that
+    // move the ray to the box (far origins, flat axes, huge tmax, segments).
+    let far = [
+        Category::FarOrigin1e3,
+        Category::FarOrigin,
+        Category::FarOrigin1e7,
+        Category::HugeTmax,
+        Category::FarGrazing,
+        Category::BoundedSegment,
+    ];
+    let scenes: [(&str, f32, &[Category], usize); 4] = [
+        ("teapot.obj", 1.0, &Category::ALL, 300),
+        ("teapot.obj", 1e5, &Category::ALL, 300),
+        ("cornell_box.obj", 1.0, &Category::ALL, 300),
+        ("bunny.obj", 1.0, &far, 100),
+    ];
+    for (name, scale, categories, per_category) in scenes {
+        if common::fetched_scene(name).is_none() {
+            continue;
+        }
         let (scene, tree, links) = scaled_scene(name, scale);
         let triangles = &scene.triangles;
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
-        let rays: Vec<Ray> = Category::ALL.iter().flat_map(|&c| stress_rays(c, triangles, &tree, 300, 3)).collect();
+        let rays: Vec<Ray> =
+            categories.iter().flat_map(|&c| stress_rays(c, triangles, &tree, per_category, 3)).collect();
         for variant in Variant::ALL {
             for any_hit in [false, true] {
                 let traversal = Traversal { any_hit, ..Traversal::closest(variant) };
@@ -469,16 +487,7 @@ fn plain_kernels_and_every_short_stack_size() {
         let (scene, tree, _) = scaled_scene(name, 1.0);
         let triangles = &scene.triangles;
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
-        let batches: Vec<Batch> = Category::ALL
-            .iter()
-            .map(|&c| (c, stress_rays(c, triangles, &tree, 200, 13)))
-            .filter(|(_, r)| !r.is_empty())
-            .map(|(c, rays)| {
-                let exacts = exact_answers(triangles, &rays);
-                let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
-                (c, rays, exacts, stack)
-            })
-            .collect();
+        let batches = batches(tracer, triangles, &tree, 200, 13);
         let mut plain: Vec<Traversal> = traversals();
         for size in 1..=8 {
             for variant in [Variant::ShortStack, Variant::PushDownShortStack] {

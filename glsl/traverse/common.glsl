@@ -6,22 +6,20 @@
 #define TRAVERSE_COMMON_GLSL
 
 // Traversal runs in the ray's *segment frame*: t values measured from
-// origin + t_shift * dir, where t_shift is 0 except for robust rays whose origin
-// lies far outside the scene box (see shift_to_scene in trace.comp). There the
-// origin is moved to the box entry, kept as origin + origin_lo (two f32, from
-// f64), so that split decisions carry an error bound in scene space (t_err)
-// instead of one relative to a huge t, and hits (best.t and its bound, the f32
-// triangle test) are in the same frame; tmin and tmax stay the ray's own, and
-// trace.comp converts the hit back when it writes it.
+// wr.seg_origin + wr.seg_lo = origin + wr.t_shift * dir, where t_shift is 0
+// except for robust rays whose origin lies far outside the scene box (see
+// shift_to_scene in trace.comp). There the origin is moved to the box entry
+// (two f32, from f64), so that split decisions carry an error bound in scene
+// space (t_err) instead of one relative to a huge t, and hits (best.t and its
+// bound, the f32 triangle test) are in the same frame; tmin and tmax stay the
+// ray's own, and trace.comp converts the hit back when it writes it. The frame
+// is defined once, in `wr` (WatertightRay, triangle.glsl).
 struct TraceRay {
     WatertightRay wr;
-    vec3 origin;     // segment frame origin (the ray's origin when t_shift is 0)
-    vec3 origin_lo;  // the rest of the moved origin (0 when t_shift is 0)
     vec3 dir;
     vec3 inv_dir;
     float tmin;   // the ray's own bounds: a hit must lie in [tmin, tmax]
     float tmax;
-    float t_shift;  // segment t = ray t - t_shift
     float t_err;    // absolute error bound of a segment-frame plane distance
     // Axes along which a shifted ray moves so little that t_err would span a good
     // part of the scene (bit per axis): their planes are decided by position
@@ -38,15 +36,16 @@ bool is_flat(TraceRay r, uint axis) {
 // On a flat axis: -1 when the ray stays below `plane` (its whole band of
 // coordinates), +1 when above, 0 when the band reaches the plane.
 int flat_side(TraceRay r, uint axis, float plane) {
-    precise float gap = (plane - r.origin[axis]) - r.origin_lo[axis];
+    precise float gap = (plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis];
     return gap > r.band[axis] ? -1 : (gap < -r.band[axis] ? 1 : 0);
 }
 
-// Distance (segment frame) along the ray to the plane `axis` = `plane`. Exact
-// arithmetic with origin_lo = 0 is today's (plane - origin) * inv_dir, bit for bit.
+// Distance (segment frame) along the ray to the plane `axis` = `plane`. With
+// seg_lo = 0 both forms give the same bits; kernels without SEGMENT_FRAME skip
+// the subtraction (lavapipe would run it).
 float plane_t(TraceRay r, uint axis, float plane) {
-    precise float shifted = (plane - r.origin[axis]) - r.origin_lo[axis];
-    precise float t = (SEGMENT_FRAME ? shifted : plane - r.origin[axis]) * r.inv_dir[axis];
+    precise float shifted = (plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis];
+    precise float t = (SEGMENT_FRAME ? shifted : plane - r.wr.seg_origin[axis]) * r.inv_dir[axis];
     return t;
 }
 
@@ -89,12 +88,12 @@ uvec2 fetch_node(uint node, inout TraceCounters c) {
 // clips away a hit on the box boundary.
 // In the segment frame, the bounds widen by t_err too (0 unless shifted).
 bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
-    precise float tmin_seg = r.tmin - r.t_shift;
-    precise float tmax_seg = r.tmax - r.t_shift;
+    precise float tmin_seg = r.tmin - r.wr.t_shift;
+    precise float tmax_seg = r.tmax - r.wr.t_shift;
     t0 = SEGMENT_FRAME ? tmin_seg : r.tmin;
     t1 = SEGMENT_FRAME ? tmax_seg : r.tmax;
     for (uint axis = 0u; axis < 3u; ++axis) {
-        float o = r.origin[axis];
+        float o = r.wr.seg_origin[axis];
         if (r.dir[axis] == 0.0) {
             if (o < bmin[axis] || o > bmax[axis]) return false;
             continue;
@@ -154,7 +153,7 @@ uint decide_children(TraceRay r, uint node, uvec2 n, float t0, float t1, uvec2 e
                      out uint near, out uint far, out float t_split) {
     uint axis = node_axis(n);
     float split = node_split(n);
-    float o = r.origin[axis];
+    float o = r.wr.seg_origin[axis];
     float d = r.dir[axis];
     bool below_first = (floatBitsToUint(d) >> 31u) == 0u;
     uint below = node + 1u;
@@ -318,7 +317,7 @@ float best_reach(Hit best) {
 
 // The ray's tmin in the segment frame (the f32 triangle test's).
 float seg_tmin(TraceRay r) {
-    precise float t = r.tmin - r.t_shift;
+    precise float t = r.tmin - r.wr.t_shift;
     return SEGMENT_FRAME ? t : r.tmin;
 }
 

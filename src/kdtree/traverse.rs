@@ -229,17 +229,15 @@ impl<'a> SceneRef<'a> {
 }
 
 /// The ray as traversal sees it: `TraceRay` of common.glsl. Traversal t values
-/// are in the segment frame (`t - t_shift`, from `origin + origin_lo`); hits,
-/// `tmin` and `tmax` in the ray's own parameter.
+/// and hits are in the segment frame that `wr` defines (`t - wr.t_shift`, from
+/// `wr.seg_origin + wr.seg_lo`); `tmin` and `tmax` in the ray's own parameter.
+/// The CPU twin always traces as the careful pass does (SEGMENT_FRAME): where
+/// the shader selects to save instructions, the values here are the same bits
+/// (a subtraction of a zero `seg_lo`, `t_shift` or `t_err`).
 struct TraceRay {
     wr: WatertightRay,
     /// [`Traversal::robust`]: the widening of the split decisions.
     eps: f32,
-    robust: bool,
-    /// The segment frame's origin (the ray's own unless shifted).
-    origin: Vec3,
-    origin_lo: Vec3,
-    t_shift: f32,
     /// Absolute error bound of a segment-frame plane distance (0 unless shifted).
     t_err: f32,
     /// Flat axes (bit per axis) of a shifted ray and the band of coordinates it
@@ -279,10 +277,6 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         let mut r = TraceRay {
             wr: WatertightRay { robust: traversal.robust, ..WatertightRay::new(origin, dir).with_tmax(ray.tmax) },
             eps: if traversal.robust { T_EPS } else { 0.0 },
-            robust: traversal.robust,
-            origin,
-            origin_lo: Vec3::ZERO,
-            t_shift: 0.0,
             t_err: 0.0,
             flat_axes: 0,
             band: Vec3::ZERO,
@@ -295,8 +289,10 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         };
         let mut clipped = clip_to_box(&r, &scene.bounds);
         if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
-            clipped = shift_to_scene(&mut r, &scene.bounds, t0, t1);
-            best.t = ray.tmax - r.t_shift; // the segment frame, like every hit below
+            if is_far(&r, &scene.bounds, t0) {
+                clipped = shift_to_scene(&mut r, &scene.bounds, t0, t1);
+                best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
+            }
         }
         if let Some((t0, t1)) = clipped {
             let mut s = State { scene, r: &r, best: &mut best, closest: Closest::NONE, c: &mut c };
@@ -316,8 +312,8 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             }
         }
         // Back to the ray's own parameter (one rounding, in f64).
-        if traversal.robust && r.t_shift != 0.0 {
-            best.t = (best.t as f64 + r.t_shift as f64) as f32;
+        if r.wr.t_shift != 0.0 {
+            best.t = (best.t as f64 + r.wr.t_shift as f64) as f32;
         }
     }
     if best.prim_id >= PRIM_INCOMPLETE {
@@ -385,18 +381,17 @@ const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
 
 /// Distance (segment frame) to the plane `axis` = `plane`: `plane_t` in common.glsl.
 fn plane_t(r: &TraceRay, axis: usize, plane: f32) -> f32 {
-    let d = if r.robust { (plane - r.origin[axis]) - r.origin_lo[axis] } else { plane - r.origin[axis] };
-    d * r.inv_dir[axis]
+    ((plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis]) * r.inv_dir[axis]
 }
 
-/// `is_flat` in common.glsl.
+/// `is_flat` in common.glsl (only a shifted ray has flat axes).
 fn is_flat(r: &TraceRay, axis: usize) -> bool {
-    r.robust && (r.flat_axes >> axis) & 1 != 0
+    (r.flat_axes >> axis) & 1 != 0
 }
 
 /// `flat_side` in common.glsl: -1 below `plane`, +1 above, 0 within the band.
 fn flat_side(r: &TraceRay, axis: usize, plane: f32) -> i32 {
-    let gap = (plane - r.origin[axis]) - r.origin_lo[axis];
+    let gap = (plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis];
     if gap > r.band[axis] {
         -1
     } else if gap < -r.band[axis] {
@@ -406,28 +401,21 @@ fn flat_side(r: &TraceRay, axis: usize, plane: f32) -> i32 {
     }
 }
 
-/// `seg_err` in common.glsl: the absolute widening of a robust shifted ray.
-fn seg_err(r: &TraceRay) -> f32 {
-    if r.robust {
-        r.t_err
-    } else {
-        0.0
-    }
-}
-
-/// Twin of `shift_to_scene` in trace.comp: a robust ray from more than
-/// [`SHIFT_DIAGONALS`](crate::consts::SHIFT_DIAGONALS) scene diagonals away is
-/// traversed from its entry `t0` into the box, with the bound `t_err`; returns
-/// the clip there (None: it misses after all). `t0`, `t1`: the clip in the
-/// ray's own frame.
-fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, f32)> {
+/// Twin of `is_far` in trace.comp: the box entry `t0` lies more than
+/// [`SHIFT_DIAGONALS`](crate::consts::SHIFT_DIAGONALS) scene diagonals along the ray.
+fn is_far(r: &TraceRay, b: &Aabb, t0: f32) -> bool {
     let ext = b.max - b.min;
     let diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
     let dist = t0 * glsl_max(r.dir.x.abs(), glsl_max(r.dir.y.abs(), r.dir.z.abs()));
     let far2 = (crate::consts::SHIFT_DIAGONALS * crate::consts::SHIFT_DIAGONALS) as f32 * diag2;
-    if !(t0 > 0.0 && dist * dist > far2) {
-        return clip_to_box(r, b);
-    }
+    t0 > 0.0 && dist * dist > far2
+}
+
+/// Twin of `shift_to_scene` in trace.comp: a far ray ([`is_far`]) is traversed
+/// from its entry `t0` into the box, with the bound `t_err` and its flat axes;
+/// returns the clip there (None: it misses after all). `t0`, `t1`: the clip in
+/// the ray's own frame.
+fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, f32)> {
     let t_shift = t0 as f64;
     let mut hi = Vec3::ZERO;
     let mut lo = Vec3::ZERO;
@@ -436,7 +424,7 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, 
     // Flat axes: see trace.comp.
     let s_max = (t1 as f64 - t0 as f64) + (t1.abs() as f64) * 2f64.powi(-20);
     for axis in 0..3 {
-        let (o, d) = (r.origin[axis] as f64, r.dir[axis] as f64);
+        let (o, d) = (r.wr.origin[axis] as f64, r.dir[axis] as f64);
         let p = o + t_shift * d;
         hi[axis] = p as f32;
         let rest = p - hi[axis] as f64;
@@ -454,9 +442,6 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, 
         }
     }
     r.t_err = ((e * 1.000001) as f32).max(f32::MIN_POSITIVE);
-    r.origin = hi;
-    r.origin_lo = lo;
-    r.t_shift = t0;
     r.wr.seg_origin = hi;
     r.wr.seg_lo = lo;
     r.wr.seg_err = seg_err;
@@ -467,9 +452,9 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, 
 
 /// Slab clip of [tmin, tmax] to the scene box; twin of `clip_to_box` in common.glsl.
 fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
-    let (mut t0, mut t1) = if r.robust { (r.tmin - r.t_shift, r.tmax - r.t_shift) } else { (r.tmin, r.tmax) };
+    let (mut t0, mut t1) = (r.tmin - r.wr.t_shift, r.tmax - r.wr.t_shift);
     for axis in 0..3 {
-        let o = r.origin[axis];
+        let o = r.wr.seg_origin[axis];
         if r.dir[axis] == 0.0 {
             if o < b.min[axis] || o > b.max[axis] {
                 return None;
@@ -484,8 +469,8 @@ fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
         }
         let ta = plane_t(r, axis, b.min[axis]);
         let tb = plane_t(r, axis, b.max[axis]);
-        let tnear = glsl_min(ta, tb) - seg_err(r);
-        let tfar = glsl_max(ta, tb) * TFAR_SCALE + seg_err(r);
+        let tnear = glsl_min(ta, tb) - r.t_err;
+        let tfar = glsl_max(ta, tb) * TFAR_SCALE + r.t_err;
         t0 = glsl_max(t0, tnear);
         t1 = glsl_min(t1, tfar);
     }
@@ -561,7 +546,7 @@ fn decide_children(
 ) -> (Visit, u32, u32, f32) {
     let axis = n.axis();
     let split = n.split();
-    let o = r.origin[axis];
+    let o = r.wr.seg_origin[axis];
     let d = r.dir[axis];
     let below_first = !d.is_sign_negative();
     let (below, above) = (index + 1, n.above_child());
@@ -570,7 +555,7 @@ fn decide_children(
     let ts = plane_t(r, axis, split).clamp(-f32::MAX, f32::MAX);
     // Conservative (see common.glsl): one child only beyond rounding; after a
     // restart, planes before t0 are passed, and so is the exit plane at t0.
-    let (eps, err) = (r.eps, seg_err(r));
+    let (eps, err) = (r.eps, r.t_err);
     let (ts_lo, ts_hi) = (ts - eps * ts.abs() - err, ts + eps * ts.abs() + err);
     let (t0_lo, t1_hi) = (t0 - eps * t0.abs() - err, t1 + eps * t1.abs() + err);
     let far_only = match exit_plane {
@@ -619,7 +604,7 @@ fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, clo
     let mut tie = false;
     for i in 0..count {
         let (prim, [v0, v1, v2]) = triangle((offset + i) as u32);
-        match r.wr.intersect_f32(v0, v1, v2, r.tmin - r.t_shift, best.t + closest.err) {
+        match r.wr.intersect_f32(v0, v1, v2, r.tmin - r.wr.t_shift, best.t + closest.err) {
             TriTest::Hit(t, u, v, e) => {
                 // [t - e, t + e] meets the closest hit's interval: order them in f64
                 // (unless it is the same triangle, met again in another leaf).
@@ -668,7 +653,7 @@ fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Hit, clo
             break;
         }
         let (prim, [v0, v1, v2]) = triangle(reference);
-        let result = r.wr.intersect_f32(v0, v1, v2, r.tmin - r.t_shift, window);
+        let result = r.wr.intersect_f32(v0, v1, v2, r.tmin - r.wr.t_shift, window);
         let unsure_pair = result == TriTest::Unsure;
         if unsure_pair && in_leaf {
             unsure -= 1;
@@ -799,7 +784,7 @@ fn stack_successor(s: &mut State, start: u32, s0: f32, s1: f32, leaf: u32, known
 /// `t_from`: leaves whose segment ends before it (less the widening) are done
 /// already (the fallback of robust backtrack and ropes); `-f32::MAX` for none.
 fn trace_restart_exact(s: &mut State, mut t0: f32, mut t1: f32, use_push_down: bool, t_from: f32) -> bool {
-    let t_from_lo = t_from - T_EPS * t_from.abs() - seg_err(s.r);
+    let t_from_lo = t_from - T_EPS * t_from.abs() - s.r.t_err;
     let mut node = 0u32;
     let (mut restart_node, mut restart_t0, mut restart_t1) = (0u32, t0, t1);
     let mut push_down = use_push_down;
@@ -1092,7 +1077,7 @@ fn box_face_plane(b: &[f32; 6], face: usize) -> ExitPlane {
 
 /// Twin of `near_t0` in common.glsl: `ts` within the widening of `t0`.
 fn near_t0(r: &TraceRay, ts: f32, t0: f32) -> bool {
-    (ts - t0).abs() <= T_EPS * glsl_min(glsl_max(ts.abs(), t0.abs()), f32::MAX) + seg_err(r)
+    (ts - t0).abs() <= T_EPS * glsl_min(glsl_max(ts.abs(), t0.abs()), f32::MAX) + r.t_err
 }
 
 /// Twin of `ambiguous_decision` in common.glsl: a ray inside the split plane, or
