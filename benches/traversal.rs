@@ -28,6 +28,7 @@ fn main() {
         builders: vec!["default".into()],
         kinds: RayKind::ALL.to_vec(),
         embree: cfg!(feature = "embree"),
+        ray_query: false,
         seed: 1,
     };
     let mut it = std::env::args().skip(1);

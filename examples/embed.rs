@@ -475,6 +475,7 @@ impl Engine {
                 allocator: Arc::clone(&self.allocator),
                 enabled_features: self.enabled_features,
                 subgroup_size_control: false,
+                ray_query: false,
             })
         }
     }

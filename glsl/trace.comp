@@ -10,8 +10,10 @@
 #extension GL_GOOGLE_include_directive : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_EXT_samplerless_texture_functions : require
 
 #include "ray.glsl"
+#include "ray_checks.glsl"
 #include "kdnode.glsl"
 
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
@@ -37,9 +39,12 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 // branchy loop, whereas a texel fetch is a straight-line gather of whole texels.
 // Nodes: R32G32_UINT, one texel per node. Triangles: R32G32B32A32_UINT, three
 // texels per leaf reference, in prim_indices order: (v0, prim), (v1, 0), (v2, 0).
-layout(set = 0, binding = BINDING_NODES) uniform usamplerBuffer node_texels;
+// Declared as texture buffers without a sampler (texelFetch through
+// GL_EXT_samplerless_texture_functions): a sampled image of dimension Buffer is
+// deprecated SPIR-V, which Mesa 25 reports as a warning.
+layout(set = 0, binding = BINDING_NODES) uniform utextureBuffer node_texels;
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
-layout(set = 0, binding = BINDING_TRIANGLES) uniform usamplerBuffer tri_texels;
+layout(set = 0, binding = BINDING_TRIANGLES) uniform utextureBuffer tri_texels;
 // Rays are read as four 64-bit words (bits only, no float64 arithmetic): lavapipe
 // loads storage buffers per lane and per component, so 4 loads beat 8.
 layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { double ray_words[]; };
@@ -70,12 +75,6 @@ const float FLT_MAX = 3.40282347e38;
 #include "packet_short_stack.glsl"
 
 
-bool ray_is_valid(Ray ray) {
-    bool origin_ok = !any(isnan(ray.origin)) && !any(isinf(ray.origin));
-    bool dir_ok = !any(isnan(ray.dir)) && any(notEqual(ray.dir, vec3(0.0)));
-    return origin_ok && dir_ok && !isnan(ray.tmin) && !isnan(ray.tmax);
-}
-
 // Robust rays from far away (more than SHIFT_DIAGONALS scene diagonals before
 // the box): move the segment frame's origin to the box entry t0 (in f64, kept as
 // two f32) and clip again there, widened by t_err, a bound on the error of any
@@ -99,9 +98,13 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     double t_shift = double(t0);
     precise dvec3 p = o + t_shift * d;
     vec3 hi = vec3(p);
-    precise dvec3 rest = p - dvec3(hi);
+    // Mesa 25 folds dvec3(vec3(p)) into p, dropping the f32 rounding (lavapipe
+    // 25.0.7, `precise` or not): hi goes back to f64 through its bits XORed with
+    // params.pad0, a push constant that is always 0 and unknown to the compiler.
+    dvec3 hi64 = dvec3(uintBitsToFloat(floatBitsToUint(hi) ^ uvec3(params.pad0)));
+    precise dvec3 rest = p - hi64;
     vec3 lo = vec3(rest);
-    precise dvec3 a = abs(dvec3(hi)) * double(1.0 / 35184372088832.0)   // 2^-45
+    precise dvec3 a = abs(hi64) * double(1.0 / 35184372088832.0)   // 2^-45
                       + (abs(o) + abs(t_shift * d)) * double(1.0 / 1125899906842624.0);  // 2^-50
     // Flat axes: where a / |d| would exceed T_EPS s_max, s_max a bound on |t| over
     // the segment in the new frame (the box's span along the ray, from the clip
@@ -197,10 +200,7 @@ void trace_ray(uint index) {
     best.v = 0.0;
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
 
-    // Denormal direction components count as zeros of the same sign (as on GPUs
-    // that flush them; the CPU twins and the exact reference do the same).
-    vec3 signed_zero = uintBitsToFloat(floatBitsToUint(ray.dir) & uvec3(0x80000000u));
-    ray.dir = mix(ray.dir, signed_zero, lessThan(abs(ray.dir), vec3(FLT_MIN_NORMAL)));
+    ray.dir = traced_dir(ray.dir);
     bool valid = ray_is_valid(ray);
     TraceRay r;
     r.dir = ray.dir;

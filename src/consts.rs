@@ -79,6 +79,17 @@ pub const BINDING_ROPES: u32 = 8;
 pub const BINDING_CAREFUL: u32 = 9;
 /// Number of bindings of the trace kernel.
 pub const TRACE_BINDINGS: u32 = 10;
+// Descriptor bindings of the ray-query kernel (`glsl/trace_ray_query.comp`, set 0).
+/// Binding of the driver's top-level acceleration structure over the scene.
+pub const RQ_BINDING_SCENE: u32 = 0;
+/// Binding of the scene's triangle index of each triangle in the driver's order (`u32` each).
+pub const RQ_BINDING_PRIM_IDS: u32 = 1;
+/// Binding of the input rays (32-byte std430 `Ray`s, read-only).
+pub const RQ_BINDING_RAYS: u32 = 2;
+/// Binding of the output hits (16-byte std430 `Hit`s, write-only).
+pub const RQ_BINDING_HITS: u32 = 3;
+/// Number of bindings of the ray-query kernel.
+pub const RQ_BINDINGS: u32 = 4;
 /// Words before the ray indices in the careful-pass list.
 pub const CAREFUL_HEADER_WORDS: u32 = 4;
 /// Workgroups per row (x) of the careful pass's indirect dispatch: Vulkan's
@@ -140,6 +151,10 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
     ("BINDING_ROPES", BINDING_ROPES),
     ("BINDING_CAREFUL", BINDING_CAREFUL),
+    ("RQ_BINDING_SCENE", RQ_BINDING_SCENE),
+    ("RQ_BINDING_PRIM_IDS", RQ_BINDING_PRIM_IDS),
+    ("RQ_BINDING_RAYS", RQ_BINDING_RAYS),
+    ("RQ_BINDING_HITS", RQ_BINDING_HITS),
     ("CAREFUL_HEADER_WORDS", CAREFUL_HEADER_WORDS),
     ("CAREFUL_MAX_GROUPS", CAREFUL_MAX_GROUPS),
     ("PASS_ONE", PASS_ONE),

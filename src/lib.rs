@@ -9,7 +9,10 @@
 //! SAH builder of Wald & Havran (2006) ([`kdtree::KdTree::build`]), uploaded once,
 //! and traversed by a compute kernel, one ray per invocation, with the watertight
 //! ray/triangle test of Woop, Benthin & Wald (2013). Every GPU traversal has a CPU
-//! twin ([`kdtree::traverse`]) that tests compare against bit for bit.
+//! twin ([`kdtree::traverse`]) that tests compare against bit for bit. On devices
+//! with `VK_KHR_ray_query` the driver's own BVH is a second backend behind the
+//! same API ([`trace::Backend`], [`ray_query`]): the peer every traversal is
+//! compared with.
 //!
 //! # Quick start: headless
 //!
@@ -75,6 +78,7 @@
 //!         allocator,
 //!         enabled_features: kdtrace::gpu::required_features(), // as the device was created
 //!         subgroup_size_control: false,
+//!         ray_query: false, // or true, with the ray-query backend's extensions and features enabled
 //!     })?
 //! };
 //! let mut tracer = Tracer::new(&ctx, tree, triangles)?; // uploads: submits and waits
@@ -137,6 +141,7 @@ pub mod geom;
 pub mod gpu;
 pub mod io;
 pub mod kdtree;
+pub mod ray_query;
 pub mod raygen;
 pub mod reference;
 pub mod render;

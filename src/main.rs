@@ -10,10 +10,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use kdtrace::gpu::{list_devices, ContextOptions, GpuContext};
 use kdtrace::kdtree::traverse::{Counters, Traversal};
-use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::kdtree::{BuildConfig, BuildProgress, KdTree};
 use kdtrace::render::{PointLight, Primary, RenderPlan, RenderSettings};
 use kdtrace::scene::{Camera, Scene};
-use kdtrace::trace::{TraceOptions, Tracer};
+use kdtrace::trace::{Backend, TraceOptions, TracePipelines, Tracer};
 
 #[derive(Parser)]
 #[command(name = "kdtrace", version, about = "SAH kd-tree ray tracing on the GPU through Vulkan compute")]
@@ -67,6 +67,12 @@ struct RenderArgs {
     fov: Option<f32>,
     #[command(flatten)]
     traversal: TraversalArgs,
+    #[command(flatten)]
+    tree: TreeArgs,
+    /// Print the wall time of every stage (OBJ, kd-tree, device, upload, render,
+    /// write) on stderr.
+    #[arg(long)]
+    timings: bool,
     /// Write a per-pixel cost heatmap instead of the shaded image: nodes | triangles.
     #[arg(long)]
     heatmap: Option<String>,
@@ -140,6 +146,10 @@ struct TraversalArgs {
     /// recompute only at an edge function of 0 (to measure what they cost).
     #[arg(long)]
     plain: bool,
+    /// kd-tree (kdtrace's kernels) or ray-query (the driver's own BVH and
+    /// VK_KHR_ray_query, a peer: no traversal options or counters; Mesa >= 24 lavapipe or a GPU).
+    #[arg(long, default_value = "kd-tree")]
+    backend: Backend,
 }
 
 impl TraversalArgs {
@@ -165,6 +175,8 @@ struct VerifyArgs {
     rays: Option<PathBuf>,
     #[command(flatten)]
     traversal: TraversalArgs,
+    #[command(flatten)]
+    tree: TreeArgs,
     /// Verify any-hit (shadow) answers instead of closest hits.
     #[arg(long)]
     any_hit: bool,
@@ -192,6 +204,8 @@ struct VerifyArgs {
 struct SubgroupsArgs {
     /// OBJ scene file.
     scene: PathBuf,
+    #[command(flatten)]
+    tree: TreeArgs,
     /// Camera rays: image width and height.
     #[arg(long, default_value_t = 256)]
     width: u32,
@@ -216,13 +230,14 @@ struct BenchArgs {
     /// OBJ scene files.
     #[arg(required = true)]
     scenes: Vec<PathBuf>,
-    /// Camera rays: image width and height.
-    #[arg(long, default_value_t = 256)]
+    /// Camera rays: image width and height (full-size batches by default: small
+    /// ones measure per-dispatch overheads rather than traversal).
+    #[arg(long, default_value_t = 1024)]
     width: u32,
-    #[arg(long, default_value_t = 192)]
+    #[arg(long, default_value_t = 768)]
     height: u32,
     /// Random rays (uniform origins in the box, uniform directions).
-    #[arg(long, default_value_t = 50_000)]
+    #[arg(long, default_value_t = 1_000_000)]
     random: usize,
     /// Timed repetitions per cell (after one warm-up); median, min and max are reported.
     #[arg(long, default_value_t = 3)]
@@ -242,7 +257,7 @@ struct BenchArgs {
     /// Robustness levels: on, off or on,off.
     #[arg(long, default_value = "on,off")]
     robust: String,
-    /// Builder settings: default, pbrt-v3, wald-havran.
+    /// Builder settings: default, sweep (default's costs, exact sweep everywhere), pbrt-v3, wald-havran.
     #[arg(long, default_value = "default,pbrt-v3,wald-havran")]
     builders: String,
     /// Ray kinds: camera, shadow, reflection, diffuse, random, hard (the stress
@@ -255,6 +270,10 @@ struct BenchArgs {
     /// Leave Embree out (it runs by default when built with --features embree).
     #[arg(long)]
     no_embree: bool,
+    /// Device backends, comma-separated: kd-tree (the --traversals cells), ray-query
+    /// (the driver's ray query, one cell per ray kind; Mesa >= 24 lavapipe or a GPU).
+    #[arg(long, default_value = "kd-tree")]
+    backend: String,
     /// Leave the Vulkan device out (CPU peers only).
     #[arg(long)]
     no_gpu: bool,
@@ -297,6 +316,8 @@ struct BenchArgs {
     /// CSV of the image cells.
     #[arg(long, default_value = "bench-images.csv")]
     images_csv: PathBuf,
+    #[command(flatten)]
+    tree: TreeArgs,
 }
 
 #[derive(clap::Args)]
@@ -310,6 +331,8 @@ struct TraceArgs {
     output: PathBuf,
     #[command(flatten)]
     traversal: TraversalArgs,
+    #[command(flatten)]
+    tree: TreeArgs,
     /// Any-hit (shadow-ray) mode: report the first occluder found, not the closest hit.
     #[arg(long)]
     any_hit: bool,
@@ -320,6 +343,10 @@ struct TraceArgs {
     /// instead of the file's; hits and counters are still written in file order.
     #[arg(long)]
     sort: bool,
+    /// Print the wall time of every stage (rays, OBJ, kd-tree, device, upload,
+    /// pipelines, trace, write) on stderr.
+    #[arg(long)]
+    timings: bool,
 }
 
 #[derive(clap::Args)]
@@ -350,9 +377,66 @@ struct StatsArgs {
     /// Clip only triangle boxes at splits, not the triangles (no "perfect splits").
     #[arg(long)]
     box_clipping: bool,
+    #[command(flatten)]
+    builder: BuilderArgs,
     /// Worker threads for the build (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+}
+
+/// The split search of the kd-tree builder.
+#[derive(clap::Args)]
+struct BuilderArgs {
+    /// binned: binned SAH on the large nodes, the exact sweep below (the
+    /// default's); sweep: the exact SAH sweep at every node.
+    #[arg(long, value_enum)]
+    builder: Option<BuilderKind>,
+    /// Binned builder: bins per axis [default: 64].
+    #[arg(long)]
+    bins: Option<u32>,
+    /// Binned builder: nodes of at least this many triangles are binned [default: 4096].
+    #[arg(long)]
+    binned_above: Option<u32>,
+}
+
+/// The builder as `stats` prints it: `sweep` or `binned:BINS:MIN_PRIMS`.
+fn builder_name(b: &kdtrace::kdtree::Builder) -> String {
+    match b {
+        kdtrace::kdtree::Builder::Sweep => "sweep".into(),
+        kdtrace::kdtree::Builder::Binned { bins, min_prims } => format!("binned:{bins}:{min_prims}"),
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+enum BuilderKind {
+    Sweep,
+    Binned,
+}
+
+impl BuilderArgs {
+    /// `config` with the builder these options choose (its own when none).
+    fn apply(&self, config: BuildConfig) -> Result<BuildConfig> {
+        use kdtrace::kdtree::Builder;
+        let binned = match (self.builder, config.builder) {
+            (Some(BuilderKind::Sweep), _) | (None, Builder::Sweep) => {
+                if self.bins.is_some() || self.binned_above.is_some() {
+                    bail!("--bins and --binned-above apply to the binned builder (--builder binned)");
+                }
+                return Ok(BuildConfig { builder: Builder::Sweep, ..config });
+            }
+            (_, Builder::Binned { bins, min_prims }) => (bins, min_prims),
+            (Some(BuilderKind::Binned), Builder::Sweep) => match Builder::BINNED {
+                Builder::Binned { bins, min_prims } => (bins, min_prims),
+                Builder::Sweep => unreachable!("Builder::BINNED is binned"),
+            },
+        };
+        let bins = self.bins.unwrap_or(binned.0);
+        if bins < 2 {
+            bail!("--bins must be at least 2");
+        }
+        let min_prims = self.binned_above.unwrap_or(binned.1);
+        Ok(BuildConfig { builder: Builder::Binned { bins, min_prims }, ..config })
+    }
 }
 
 #[derive(clap::Args)]
@@ -411,18 +495,146 @@ fn spinner(message: String) -> ProgressBar {
     bar
 }
 
-/// Loads the scene and builds its tree, with a spinner while that runs.
-fn load_and_build(path: &Path) -> Result<(Scene, KdTree)> {
+/// Loads the scene and builds its tree (or loads it from the tree cache), with a
+/// progress bar while that runs.
+fn load_and_build(path: &Path, tree: &TreeArgs, stages: &mut Stages) -> Result<(Scene, KdTree)> {
     let bar = spinner(format!("loading {}", path.display()));
     let scene = Scene::load(path)?;
-    bar.set_message(format!("building kd-tree over {} triangles", scene.triangles.len()));
-    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    stages.mark("parse and check the OBJ");
+    let tree = build_tree(&bar, &scene.triangles, tree)?;
+    stages.mark("kd-tree (build or cache)");
     bar.finish_and_clear();
     Ok((scene, tree))
 }
 
+/// The wall time of each stage of a command, printed on stderr with `--timings`.
+struct Stages {
+    enabled: bool,
+    start: Instant,
+    last: Instant,
+    list: Vec<(&'static str, f64)>,
+    notes: Vec<String>,
+}
+
+impl Stages {
+    fn new(enabled: bool) -> Stages {
+        let now = Instant::now();
+        Stages { enabled, start: now, last: now, list: Vec::new(), notes: Vec::new() }
+    }
+
+    /// Ends the stage called `name`, which began where the previous one ended.
+    fn mark(&mut self, name: &'static str) {
+        let now = Instant::now();
+        self.list.push((name, (now - self.last).as_secs_f64()));
+        self.last = now;
+    }
+
+    /// Prints the stages and the total, when enabled.
+    fn print(&self) {
+        if !self.enabled {
+            return;
+        }
+        let total = (self.last - self.start).as_secs_f64();
+        eprintln!("stages (wall):");
+        for (name, seconds) in &self.list {
+            eprintln!("  {name:<26} {seconds:>8.3} s {:>5.1} %", 100.0 * seconds / total.max(1e-12));
+        }
+        eprintln!("  {:<26} {total:>8.3} s", "total");
+        for note in &self.notes {
+            eprintln!("  ({note})");
+        }
+    }
+
+    /// A line printed after the stages (work that ran beside them).
+    fn note(&mut self, line: String) {
+        self.notes.push(line);
+    }
+}
+
+/// `--tree-cache DIR` and the builder, shared by the subcommands that build a tree.
+#[derive(clap::Args)]
+struct TreeArgs {
+    /// Folder of cached kd-trees: load the scene's tree from it when it holds a
+    /// valid one, else build the tree and store it there (bench: --images only).
+    #[arg(long, env = "KDTRACE_TREE_CACHE", value_name = "DIR")]
+    tree_cache: Option<PathBuf>,
+    #[command(flatten)]
+    builder: BuilderArgs,
+}
+
+/// Runs `build` (which reports to the [`BuildProgress`] it is given) on another
+/// thread while `bar` shows the build's stage and the fraction of the tree done.
+fn with_build_bar<T: Send>(bar: &ProgressBar, message: &str, build: impl FnOnce(&BuildProgress) -> T + Send) -> T {
+    use kdtrace::kdtree::BuildStage;
+    let progress = BuildProgress::default();
+    std::thread::scope(|scope| {
+        let worker = scope.spawn(|| build(&progress));
+        while !worker.is_finished() {
+            let stage = match progress.stage() {
+                // Not building (yet): whoever runs `build` tells the bar.
+                BuildStage::Waiting | BuildStage::Finished => None,
+                BuildStage::Preparing => Some("preparing".to_string()),
+                BuildStage::Splitting => Some(format!("{:.0} %", 100.0 * progress.fraction())),
+                BuildStage::Statistics => Some("statistics".to_string()),
+            };
+            if let Some(stage) = stage {
+                bar.set_message(format!("{message}: {stage}"));
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
+}
+
+/// The kd-tree over `triangles` with the chosen builder, built or loaded from
+/// the tree cache, with the stage on `bar` and one line on stderr about the
+/// cache file.
+fn build_tree(bar: &ProgressBar, triangles: &[[Vec3; 3]], args: &TreeArgs) -> Result<KdTree> {
+    use kdtrace::kdtree::cache::{load_or_build, CacheOutcome, Stage};
+    let config = args.builder.apply(BuildConfig::default())?;
+    let building = format!("building kd-tree over {} triangles", triangles.len());
+    let Some(dir) = &args.tree_cache else {
+        return Ok(with_build_bar(bar, &building, |p| KdTree::build_with_progress(triangles, &config, Some(p))));
+    };
+    let (tree, outcome) = with_build_bar(bar, &building, |p| {
+        load_or_build(dir, triangles, &config, Some(p), |stage| {
+            bar.set_message(match stage {
+                Stage::Hashing => "hashing the triangles for the tree cache".to_string(),
+                Stage::Loading => format!("loading kd-tree from {}", dir.display()),
+                Stage::Building => building.clone(),
+                Stage::Storing => format!("storing kd-tree in {}", dir.display()),
+            })
+        })
+    });
+    let path = outcome.path().display();
+    let build = tree.stats.build_seconds;
+    let message = match &outcome {
+        CacheOutcome::Hit { load_seconds, .. } => {
+            format!("loaded kd-tree from cache {path} in {load_seconds:.3} s (build took {build:.3} s)")
+        }
+        CacheOutcome::Stored { store_seconds, .. } => {
+            format!("built kd-tree in {build:.3} s, stored in cache {path} in {store_seconds:.3} s")
+        }
+        CacheOutcome::Rebuilt { reason, .. } => {
+            format!("warning: tree cache {path} rejected ({reason}); rebuilt in {build:.3} s and replaced")
+        }
+        CacheOutcome::StoreFailed { rejected, reason, .. } => {
+            let rejected = rejected.as_ref().map_or(String::new(), |r| format!("rejected ({r}), "));
+            format!("warning: tree cache {path} {rejected}not stored: {reason}")
+        }
+    };
+    bar.suspend(|| eprintln!("{message}"));
+    Ok(tree)
+}
+
 fn context() -> Result<std::sync::Arc<GpuContext>> {
     GpuContext::headless(&ContextOptions::from_env()).context("creating the Vulkan device")
+}
+
+/// The device for `backends`: with the ray-query extensions enabled when one is the ray query.
+fn backend_context(backends: &[Backend]) -> Result<std::sync::Arc<GpuContext>> {
+    let options = ContextOptions { ray_query: backends.contains(&Backend::RayQuery), ..ContextOptions::from_env() };
+    GpuContext::headless(&options).context("creating the Vulkan device")
 }
 
 fn trace_bar(len: usize) -> ProgressBar {
@@ -449,7 +661,8 @@ fn render(args: RenderArgs) -> Result<()> {
     if !(args.exposure.is_finite() && args.exposure >= 0.0) {
         bail!("--exposure must be a finite number >= 0");
     }
-    let (scene, tree) = load_and_build(&args.scene)?;
+    let mut stages = Stages::new(args.timings);
+    let (scene, tree) = load_and_build(&args.scene, &args.tree, &mut stages)?;
     let mut camera = default_camera(&args.scene, &scene)?;
     if let Some(eye) = args.eye {
         camera.eye = eye;
@@ -471,8 +684,10 @@ fn render(args: RenderArgs) -> Result<()> {
     {
         bail!("the camera is degenerate: eye equals target, or up is parallel to the view direction");
     }
-    let ctx = context()?;
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    let ctx = backend_context(&[args.traversal.backend])?;
+    stages.mark("Vulkan device");
+    let mut tracer = Tracer::with_backend(&ctx, args.traversal.backend, &tree, &scene.triangles)?;
+    stages.mark("upload the scene");
     if let Some(kind) = &heatmap {
         return render_heatmap(&args, &ctx, &mut tracer, &camera, traversal, kind);
     }
@@ -549,9 +764,10 @@ fn render(args: RenderArgs) -> Result<()> {
         render_once(&mut tracer, &settings)?
     };
     if args.compare {
-        compare_renders(&ctx, &tree, &scene, &settings, &out, render_once)?;
+        compare_renders(&ctx, args.traversal.backend, &tree, &scene, &settings, &out, render_once)?;
     }
 
+    stages.mark("render (pipelines, passes)");
     let mut out = out;
     if args.explain {
         // A debug colour for pixels that lost a ray (invalid or unfinished).
@@ -563,6 +779,7 @@ fn render(args: RenderArgs) -> Result<()> {
     if let Some(exr) = &args.exr {
         kdtrace::render::save_exr(exr, &out.pixels, out.width, out.height)?;
     }
+    stages.mark("write the image");
     let s = &out.stats;
     eprint!(
         "{}: {}x{}, {} spp on {}: {} camera + {} secondary + {} shadow rays",
@@ -596,6 +813,7 @@ fn render(args: RenderArgs) -> Result<()> {
         s.render_seconds * 1e3,
         s.submits
     );
+    stages.print();
     if s.bad_rays > 0 {
         let what = format!(
             "ray(s) of the render (invalid or unfinished; {} pixel(s) lack their light{})",
@@ -611,6 +829,7 @@ fn render(args: RenderArgs) -> Result<()> {
 /// kind of first hits, each on a fresh tracer; a table of their costs.
 fn compare_renders(
     ctx: &std::sync::Arc<GpuContext>,
+    backend: Backend,
     tree: &KdTree,
     scene: &Scene,
     settings: &RenderSettings,
@@ -634,7 +853,7 @@ fn compare_renders(
     );
     for (name, variant) in &variants {
         // A fresh tracer, so that the variant compiles its own pipelines.
-        let mut tracer = Tracer::new(ctx, tree, &scene.triangles)?;
+        let mut tracer = Tracer::with_backend(ctx, backend, tree, &scene.triangles)?;
         let out = render_once(&mut tracer, variant)?;
         let s = &out.stats;
         let sq =
@@ -701,14 +920,43 @@ fn default_camera(path: &Path, scene: &Scene) -> Result<Camera> {
 
 fn trace(args: TraceArgs) -> Result<()> {
     let traversal = args.traversal.parse(args.any_hit)?;
-    let variant = traversal.variant;
+    let backend = args.traversal.backend;
+    let label = if backend == Backend::KdTree { traversal.variant.name() } else { backend.name() };
+    let mut stages = Stages::new(args.timings);
     let rays = kdtrace::io::read_rays(&args.rays)?;
-    let (scene, tree) = load_and_build(&args.scene)?;
-    let ctx = context()?;
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
+    stages.mark("read the rays");
+    let options = TraceOptions { traversal, counters: args.counters.is_some() };
+    // The device and the pipelines come up on another thread while the scene
+    // loads and its tree builds.
+    let (device, loaded) = std::thread::scope(|scope| {
+        let device = scope.spawn(|| -> Result<_> {
+            let start = Instant::now();
+            let ctx = backend_context(&[backend])?;
+            let mut pipelines = TracePipelines::new(&ctx);
+            pipelines.prepare(backend, &options)?;
+            Ok((ctx, pipelines, start.elapsed().as_secs_f64()))
+        });
+        let loaded = if backend == Backend::RayQuery {
+            // The driver builds its own structure: no kd-tree needed.
+            Scene::load(&args.scene).map_err(Into::into).map(|scene| {
+                stages.mark("parse and check the OBJ");
+                (scene, KdTree::build(&[], &BuildConfig::default()))
+            })
+        } else {
+            load_and_build(&args.scene, &args.tree, &mut stages)
+        };
+        (device.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)), loaded)
+    });
+    let (scene, tree) = loaded?;
+    let (ctx, pipelines, device_seconds) = device?;
+    stages.mark("wait for the device");
+    stages.note(format!("device and pipelines, beside the above: {device_seconds:.3} s"));
+    let mut tracer = Tracer::with_backend(&ctx, backend, &tree, &scene.triangles)?;
+    tracer.adopt_pipelines(pipelines)?;
+    tracer.prepare(&options)?;
+    stages.mark("upload the scene");
     let bar = trace_bar(rays.len());
     let start = Instant::now();
-    let options = TraceOptions { traversal, counters: args.counters.is_some() };
     let order = args.sort.then(|| kdtrace::raygen::coherent_order(&rays, &scene.bounds));
     let traced: Vec<kdtrace::Ray> = match &order {
         Some(order) => order.iter().map(|&i| rays[i as usize]).collect(),
@@ -717,6 +965,7 @@ fn trace(args: TraceArgs) -> Result<()> {
     let mut result = tracer.trace_with_progress(&traced, &options, |n| bar.set_position(n as u64))?;
     let wall = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
+    stages.mark("trace");
     if let Some(order) = &order {
         // Back to the file's order.
         let mut hits = vec![kdtrace::Hit::MISS; rays.len()];
@@ -733,6 +982,7 @@ fn trace(args: TraceArgs) -> Result<()> {
         }
     }
     kdtrace::io::write_hits(&args.output, &result.hits)?;
+    stages.mark("write the hits");
     if let (Some(path), Some(counters)) = (&args.counters, &result.counters) {
         write_counters_csv(path, counters)?;
         let n = counters.len().max(1) as f64;
@@ -759,13 +1009,14 @@ fn trace(args: TraceArgs) -> Result<()> {
     match result.gpu_seconds {
         Some(s) if s > 0.0 => eprintln!(
             "traversal ({}): {:.3} ms GPU = {:.2} M rays/s (timestamps, excluding upload; wall incl. transfers {:.3} ms)",
-            variant.name(),
+            label,
             s * 1e3,
             rays.len() as f64 / s / 1e6,
             wall * 1e3
         ),
-        _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", variant.name(), wall * 1e3),
+        _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", label, wall * 1e3),
     }
+    stages.print();
     match Unfinished::from_hits(&result.hits) {
         Some(u) => Err(u.into()),
         None => Ok(()),
@@ -831,23 +1082,25 @@ fn bench(args: BenchArgs) -> Result<()> {
         "none" => Vec::new(),
         list => expand_traversals(list, &stack_sizes, &[1], &robust, None)?,
     };
+    let backends: Vec<Backend> = args.backend.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<_>>()?;
     let options = MatrixOptions {
         width: args.width,
         height: args.height,
         random: args.random,
         repeat: args.repeat,
         reference_sample: args.reference_sample,
-        traversals: if args.no_gpu { Vec::new() } else { traversals },
+        traversals: if args.no_gpu || !backends.contains(&Backend::KdTree) { Vec::new() } else { traversals },
         cpu_traversals,
         builders: args.builders.split(',').map(|s| s.trim().to_string()).collect(),
         kinds: args.kinds.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<Vec<RayKind>>>()?,
         embree: cfg!(feature = "embree") && !args.no_embree,
+        ray_query: !args.no_gpu && backends.contains(&Backend::RayQuery),
         seed: args.seed,
     };
     for b in &options.builders {
         kdtrace::bench::matrix::builder_config(b)?;
     }
-    let ctx = if args.no_gpu { None } else { Some(context()?) };
+    let ctx = if args.no_gpu { None } else { Some(backend_context(&backends)?) };
     let device = ctx.as_ref().map_or("no Vulkan device (--no-gpu)".to_string(), |c| c.info.to_string());
     let load_before = load_average();
     let mut cells = Vec::new();
@@ -958,7 +1211,7 @@ fn bench_images(
     };
     let mut cells = Vec::new();
     for path in &args.scenes {
-        let (scene, tree) = load_and_build(path)?;
+        let (scene, tree) = load_and_build(path, &args.tree, &mut Stages::new(false))?;
         let camera = default_camera(path, &scene)?;
         let name = path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned());
         let mut tracer = Tracer::new(ctx, &tree, &scene.triangles)?;
@@ -973,7 +1226,7 @@ fn bench_images(
 }
 
 fn subgroups(args: SubgroupsArgs) -> Result<()> {
-    let (scene, tree) = load_and_build(&args.scene)?;
+    let (scene, tree) = load_and_build(&args.scene, &args.tree, &mut Stages::new(false))?;
     let ctx = context()?;
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles)?;
     let camera = default_camera(&args.scene, &scene)?;
@@ -1004,6 +1257,7 @@ fn stats(args: StatsArgs) -> Result<()> {
     config.empty_bonus = args.empty_bonus.unwrap_or(config.empty_bonus);
     config.max_depth = args.max_depth.or(config.max_depth);
     config.perfect_splits &= !args.box_clipping;
+    let config = args.builder.apply(config)?;
     if !(config.traversal_cost >= 0.0 && config.intersection_cost > 0.0 && (0.0..1.0).contains(&config.empty_bonus)) {
         bail!("costs must be finite with K_T >= 0, K_I > 0 and 0 <= empty bonus < 1");
     }
@@ -1030,7 +1284,7 @@ fn stats(args: StatsArgs) -> Result<()> {
     let s = &tree.stats;
     if args.json {
         println!(
-            "{{\"scene\":{:?},\"triangles\":{},\"degenerate\":{},\"skipped\":{},\"nodes\":{},\"leaves\":{},\"empty_leaves\":{},\"depth_limit\":{},\"max_depth\":{},\"mean_leaf_depth\":{},\"refs_per_triangle\":{},\"mean_prims_per_leaf\":{},\"max_prims_per_leaf\":{},\"sah_cost\":{},\"build_seconds\":{},\"build_seconds_median\":{},\"builds\":{},\"threads\":{},\"node_bytes\":{},\"index_bytes\":{},\"peak_scratch_bytes\":{},\"traversal_cost\":{},\"intersection_cost\":{},\"empty_bonus\":{},\"perfect_splits\":{}}}",
+            "{{\"scene\":{:?},\"triangles\":{},\"degenerate\":{},\"skipped\":{},\"nodes\":{},\"leaves\":{},\"empty_leaves\":{},\"depth_limit\":{},\"max_depth\":{},\"mean_leaf_depth\":{},\"refs_per_triangle\":{},\"mean_prims_per_leaf\":{},\"max_prims_per_leaf\":{},\"sah_cost\":{},\"build_seconds\":{},\"build_seconds_median\":{},\"builds\":{},\"threads\":{},\"node_bytes\":{},\"index_bytes\":{},\"peak_scratch_bytes\":{},\"traversal_cost\":{},\"intersection_cost\":{},\"empty_bonus\":{},\"perfect_splits\":{},\"builder\":\"{}\"}}",
             args.scene.display().to_string(),
             scene.triangles.len(),
             scene.degenerate_count,
@@ -1055,7 +1309,8 @@ fn stats(args: StatsArgs) -> Result<()> {
             config.traversal_cost,
             config.intersection_cost,
             config.empty_bonus,
-            config.perfect_splits
+            config.perfect_splits,
+            builder_name(&config.builder)
         );
     } else {
         let mib = |b: usize| b as f64 / (1 << 20) as f64;
@@ -1067,8 +1322,12 @@ fn stats(args: StatsArgs) -> Result<()> {
             s.skipped_triangles
         );
         println!(
-            "config              K_T {} K_I {} empty bonus {} perfect splits {}",
-            config.traversal_cost, config.intersection_cost, config.empty_bonus, config.perfect_splits
+            "config              K_T {} K_I {} empty bonus {} perfect splits {} builder {}",
+            config.traversal_cost,
+            config.intersection_cost,
+            config.empty_bonus,
+            config.perfect_splits,
+            builder_name(&config.builder)
         );
         println!("nodes               {}", s.nodes);
         println!("leaves              {} ({} empty)", s.leaves, s.empty_leaves);
@@ -1127,7 +1386,7 @@ fn verify(args: VerifyArgs) -> Result<()> {
         }
     }
     let bar = spinner(format!("building kd-tree over {} triangles", scene.triangles.len()));
-    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let tree = build_tree(&bar, &scene.triangles, &args.tree)?;
     bar.finish_and_clear();
     let batches: Vec<(String, Vec<kdtrace::Ray>)> = match &args.rays {
         Some(path) => vec![(path.display().to_string(), kdtrace::io::read_rays(path)?)],
@@ -1137,18 +1396,22 @@ fn verify(args: VerifyArgs) -> Result<()> {
             .filter(|(_, rays)| !rays.is_empty())
             .collect(),
     };
+    let backend = args.traversal.backend;
+    if args.cpu && backend != Backend::KdTree {
+        bail!("--cpu traces with the kd-tree's CPU twin: drop --backend {backend}");
+    }
     let mut tracer = if args.cpu {
         None
     } else {
-        let ctx = context()?;
-        Some((Tracer::new(&ctx, &tree, &scene.triangles)?, ctx))
+        let ctx = backend_context(&[backend])?;
+        Some((Tracer::with_backend(&ctx, backend, &tree, &scene.triangles)?, ctx))
     };
     let device = tracer.as_ref().map_or("the CPU twin".to_string(), |(_, ctx)| ctx.info.name.clone());
     println!(
         "# kdtrace verify {} (scale {}): {} {} on {}, against the exact reference\n",
         args.scene.display(),
         args.scale,
-        traversal.variant.name(),
+        if backend == Backend::KdTree { traversal.variant.name() } else { backend.name() },
         if args.any_hit { "any-hit" } else { "closest hit" },
         device
     );
@@ -1160,9 +1423,11 @@ fn verify(args: VerifyArgs) -> Result<()> {
     let mut examples = Vec::new();
     for (label, rays) in &batches {
         let (hits, counters): (Vec<kdtrace::Hit>, Vec<Counters>) = match tracer.as_mut() {
+            // The ray query has no counters: its node columns stay empty.
             Some((tracer, _)) => {
-                let result = tracer.trace(rays, &TraceOptions { traversal, counters: true })?;
-                (result.hits, result.counters.context("the tracer returned no counters")?)
+                let counted = backend == Backend::KdTree;
+                let result = tracer.trace(rays, &TraceOptions { traversal, counters: counted })?;
+                (result.hits, result.counters.unwrap_or_default())
             }
             None => {
                 let scene_ref = kdtrace::kdtree::traverse::SceneRef::new(&tree, &scene.triangles);
@@ -1180,7 +1445,10 @@ fn verify(args: VerifyArgs) -> Result<()> {
         let tally = judge_batch(&scene.triangles, rays, &hits, args.any_hit);
         let mut nodes: Vec<u32> = counters.iter().map(|c| c.nodes).collect();
         nodes.sort_unstable();
-        let quantile = |q: f64| nodes.get(((nodes.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0);
+        let quantile = |q: f64| {
+            let index = ((nodes.len() as f64 - 1.0) * q).round() as usize;
+            nodes.get(index).map_or("—".to_string(), u32::to_string)
+        };
         println!("{} {} | {} |", table_row(label, &tally), quantile(0.5), quantile(0.99));
         total += tally.rays;
         serious += tally.serious();

@@ -5,6 +5,21 @@
 //! *Interactive k-D Tree GPU Raytracing* (I3D 2007), and kd-restart and
 //! kd-backtrack of Foley & Sugerman (2005); see [`Variant`].
 //!
+//! # Backends
+//!
+//! A tracer holds its scene in one [`Backend`]'s acceleration structure, chosen
+//! when it is made: kdtrace's kd-tree ([`Tracer::new`]) or the driver's own BVH
+//! traversed by ray queries ([`Tracer::ray_query`], the peer every traversal is
+//! compared with; [`crate::ray_query`]). Everything after that is shared: the
+//! ray and hit buffers and records, [`Tracer::bind`], [`Tracer::record_binding`],
+//! [`Tracer::record_trace`] and its barrier contract, [`Tracer::trace`], scene
+//! replacement, and so the renderer and every command. The backend belongs to
+//! the tracer rather than to each trace's [`TraceOptions`] because the two
+//! acceleration structures are built and uploaded differently (a ray-query
+//! tracer needs no kd-tree), and a binding already names its tracer's kernels.
+//! With the ray query, [`TraceOptions::traversal`] only chooses closest or any
+//! hit, and counters are refused (the driver's traversal is opaque).
+//!
 //! # Scene lifecycle
 //!
 //! 1. **Build** the kd-tree on the CPU with [`KdTree::build`] (SAH, Wald & Havran
@@ -90,14 +105,18 @@ use crate::consts::{
     BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS,
     BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY,
     COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, PASS_CAREFUL,
-    PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
+    PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, RQ_BINDINGS, RQ_BINDING_HITS, RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS,
+    RQ_BINDING_SCENE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
-use crate::gpu::{check_range, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
+use crate::gpu::{
+    check_range, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps,
+};
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{Counters, Traversal, Variant};
 use crate::kdtree::{KdNode, KdTree};
+use crate::ray_query::RayQueryScene;
 
 /// Push constants of `trace.comp` (`TraceParams` in glsl/shared/ray.glsl).
 #[repr(C)]
@@ -109,7 +128,8 @@ pub struct TraceParams {
     pub scene_max: [f32; 4],
     /// Rays in this dispatch.
     pub ray_count: u32,
-    /// Padding to 48 bytes.
+    /// Padding to 48 bytes; zeros (the kernel uses the first as a zero its
+    /// compiler cannot fold, see `shift_to_scene` in glsl/trace.comp).
     pub pad: [u32; 3],
 }
 
@@ -168,6 +188,67 @@ const DEFAULT_CHUNK: usize = 1 << 20;
 const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
 const HIT_BYTES: u64 = std::mem::size_of::<Hit>() as u64;
 const COUNTER_BYTES: u64 = COUNTERS_PER_RAY as u64 * 4;
+
+/// How a [`Tracer`] finds hits. A tracer holds its scene in one backend's
+/// acceleration structure, chosen when it is made ([`Tracer::with_backend`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Backend {
+    /// kdtrace's own SAH kd-tree, traversed by its kernels (`glsl/trace.comp`):
+    /// every [`Variant`], counters, the CPU twins.
+    #[default]
+    KdTree,
+    /// The driver's acceleration structures traversed by ray queries
+    /// (`VK_KHR_acceleration_structure`, `VK_KHR_ray_query`; [`crate::ray_query`]):
+    /// the peer every traversal is compared with. Closest or any hit
+    /// ([`Traversal::any_hit`]); the variant and its settings do not apply, and
+    /// there are no per-ray counters. Devices without the extensions (Mesa
+    /// lavapipe before 24) refuse it with `Error::DeviceLimit` naming them.
+    RayQuery,
+}
+
+impl Backend {
+    /// Every backend.
+    pub const ALL: [Backend; 2] = [Backend::KdTree, Backend::RayQuery];
+
+    /// The name on the command line: `kd-tree` or `ray-query`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::KdTree => "kd-tree",
+            Backend::RayQuery => "ray-query",
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        Backend::ALL
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| Error::InvalidInput(format!("unknown backend '{s}' (kd-tree, ray-query)")))
+    }
+}
+
+/// A tracer's scene, in its backend's acceleration structure.
+enum TracerScene {
+    KdTree(Box<SceneBuffers>),
+    RayQuery(Box<RayQueryScene>),
+}
+
+impl TracerScene {
+    fn bounds(&self) -> Aabb {
+        match self {
+            TracerScene::KdTree(s) => s.bounds,
+            TracerScene::RayQuery(s) => s.bounds,
+        }
+    }
+}
 
 /// A scene's device buffers.
 struct SceneBuffers {
@@ -241,13 +322,130 @@ impl SceneBuffers {
 /// contract of [`Tracer::record_trace`], and thread safety (`Send + Sync`).
 pub struct Tracer {
     ctx: Arc<GpuContext>,
-    scene: SceneBuffers,
+    scene: TracerScene,
     /// Incremented by `replace_scene`; bindings of an older scene are refused.
     generation: u64,
     /// Bound in place of buffers a dispatch does not use (side buffers, counters).
     dummy: Buffer,
-    kernels: Vec<((Traversal, bool), TraceKernels)>,
+    pipelines: TracePipelines,
     chunk: usize,
+}
+
+/// Compiled trace pipelines of one context, independent of any scene: compile
+/// them on another thread while the scene loads and its tree builds, then hand
+/// them to the tracer ([`Tracer::adopt_pipelines`]). A [`Tracer`] also compiles
+/// what it lacks on first use ([`Tracer::prepare`]).
+pub struct TracePipelines {
+    ctx: Arc<GpuContext>,
+    /// By backend, traversal (normalized: settings a kernel ignores are reset)
+    /// and counters; bindings refer to kernels by their index here.
+    kernels: Vec<((Backend, Traversal, bool), TraceKernels)>,
+}
+
+impl TracePipelines {
+    /// No pipelines yet, for `ctx`.
+    pub fn new(ctx: &Arc<GpuContext>) -> TracePipelines {
+        TracePipelines { ctx: ctx.clone(), kernels: Vec::new() }
+    }
+
+    /// Compiles the pipelines that tracing with `backend` and `options` needs
+    /// (nothing when they are there). The errors of [`Tracer::prepare`].
+    pub fn prepare(&mut self, backend: Backend, options: &TraceOptions) -> Result<()> {
+        self.kernel(backend, options.traversal, options.counters).map(|_| ())
+    }
+
+    /// The index of the kernels of `backend`, `traversal` and `counters`,
+    /// compiled on first use.
+    fn kernel(&mut self, backend: Backend, traversal: Traversal, counters: bool) -> Result<usize> {
+        traversal.validate()?;
+        if backend == Backend::RayQuery {
+            return self.ray_query_kernel(traversal.any_hit, counters);
+        }
+        // Variants that ignore the stack size or packets share one pipeline.
+        let key = Traversal {
+            stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
+            packet_width: if traversal.uses_packets() { traversal.packet_width } else { 1 },
+            ..traversal
+        };
+        let subgroup = key.subgroup_size.unwrap_or(self.ctx.info.subgroup_size);
+        if key.packet_width > subgroup || TRACE_WORKGROUP_SIZE % subgroup != 0 {
+            return Err(Error::DeviceLimit(format!(
+                "packet width {} needs subgroups of at least that many lanes (and dividing the workgroup of {}); {} runs subgroups of {}",
+                key.packet_width, TRACE_WORKGROUP_SIZE, self.ctx.info.name, subgroup
+            )));
+        }
+        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (Backend::KdTree, key, counters)) {
+            return Ok(i);
+        }
+        let desc = KernelDesc {
+            name: "trace",
+            spirv: shaders::TRACE,
+            bindings: TRACE_BINDINGS,
+            push_constant_size: std::mem::size_of::<TraceParams>() as u32,
+            spec_constants: &[],
+            workgroup_size: TRACE_WORKGROUP_SIZE,
+            required_subgroup_size: key.subgroup_size,
+            texel_buffers: &[
+                (BINDING_NODES, vk::Format::R32G32_UINT),
+                (BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
+            ],
+            acceleration_structures: &[],
+            // Packets decide by ballots.
+            required_subgroup_operations: if key.packet_width > 1 {
+                vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
+            } else {
+                vk::SubgroupFeatureFlags::empty()
+            },
+        };
+        let spec = |pass: u32| {
+            [
+                key.variant.id(),
+                counters as u32,
+                key.stack_size,
+                key.any_hit as u32,
+                key.packet_width,
+                key.robust as u32,
+                pass,
+            ]
+        };
+        let kernels = if key.robust && !key.uses_packets() {
+            // Robust single rays: the fast and the careful pass, compiled side by side.
+            let (fast_spec, careful_spec) = (spec(PASS_FAST), spec(PASS_CAREFUL));
+            let ctx = &self.ctx;
+            let (main, careful) = std::thread::scope(|s| {
+                let careful =
+                    s.spawn(|| Kernel::new(ctx, &KernelDesc { spec_constants: &careful_spec, ..desc.clone() }));
+                let main = Kernel::new(ctx, &KernelDesc { spec_constants: &fast_spec, ..desc.clone() });
+                (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+            });
+            TraceKernels { main: main?, careful: Some(careful?) }
+        } else {
+            let one = spec(PASS_ONE);
+            TraceKernels {
+                main: Kernel::new(&self.ctx, &KernelDesc { spec_constants: &one, ..desc.clone() })?,
+                careful: None,
+            }
+        };
+        self.kernels.push(((Backend::KdTree, key, counters), kernels));
+        Ok(self.kernels.len() - 1)
+    }
+
+    /// The ray-query kernel of closest or any hit (no counters, one pass).
+    fn ray_query_kernel(&mut self, any_hit: bool, counters: bool) -> Result<usize> {
+        if counters {
+            return Err(Error::InvalidInput(
+                "the ray-query backend has no per-ray counters (the driver's traversal is opaque)".into(),
+            ));
+        }
+        // Keyed by the mode alone: the variant and its settings do not apply.
+        let key = (Backend::RayQuery, Traversal { any_hit, ..Traversal::closest(Variant::Stack) }, false);
+        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == key) {
+            return Ok(i);
+        }
+        let main = crate::ray_query::kernel(&self.ctx, any_hit)?;
+        self.kernels.push((key, TraceKernels { main, careful: None }));
+        Ok(self.kernels.len() - 1)
+    }
 }
 
 /// The pipelines of one traversal and counter setting: one pass, or for robust
@@ -314,7 +512,35 @@ impl Tracer {
     /// does not fit `triangles` ([`KdTree::check`]); `Error::DeviceLimit` when a
     /// buffer exceeds `maxStorageBufferRange`.
     pub fn new(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<Tracer> {
-        let scene = SceneBuffers::upload(ctx, tree, triangles)?;
+        Tracer::from_scene(ctx, TracerScene::KdTree(Box::new(SceneBuffers::upload(ctx, tree, triangles)?)))
+    }
+
+    /// A tracer of `triangles` with the ray-query backend ([`Backend::RayQuery`]):
+    /// builds the driver's acceleration structures over them (sorted for build
+    /// quality; see [`crate::ray_query`]). Submits on the context's queue and waits.
+    ///
+    /// Errors: `Error::DeviceLimit` naming the extensions the device lacks (or a
+    /// limit the scene exceeds); `Error::InvalidInput` for a scene without a
+    /// triangle that can be hit.
+    pub fn ray_query(ctx: &Arc<GpuContext>, triangles: &[[Vec3; 3]]) -> Result<Tracer> {
+        Tracer::from_scene(ctx, TracerScene::RayQuery(Box::new(RayQueryScene::upload(ctx, triangles)?)))
+    }
+
+    /// A tracer with `backend`: [`Tracer::new`] over `tree` for the kd-tree,
+    /// [`Tracer::ray_query`] for ray queries (which do not use `tree`).
+    pub fn with_backend(
+        ctx: &Arc<GpuContext>,
+        backend: Backend,
+        tree: &KdTree,
+        triangles: &[[Vec3; 3]],
+    ) -> Result<Tracer> {
+        match backend {
+            Backend::KdTree => Tracer::new(ctx, tree, triangles),
+            Backend::RayQuery => Tracer::ray_query(ctx, triangles),
+        }
+    }
+
+    fn from_scene(ctx: &Arc<GpuContext>, scene: TracerScene) -> Result<Tracer> {
         let dummy =
             Buffer::new(ctx, 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly, "unused binding")?;
         // Rays (32 B), hits (16 B) and counters per chunk must fit the storage range,
@@ -323,7 +549,7 @@ impl Tracer {
         let by_range = (limit / COUNTER_BYTES.max(RAY_BYTES)) as usize;
         let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
         let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
-        Ok(Tracer { ctx: ctx.clone(), scene, generation: 0, dummy, kernels: Vec::new(), chunk })
+        Ok(Tracer { ctx: ctx.clone(), scene, generation: 0, dummy, pipelines: TracePipelines::new(ctx), chunk })
     }
 
     /// Replaces the scene with `tree` over `triangles` (same checks and upload as
@@ -332,10 +558,24 @@ impl Tracer {
     ///
     /// No trace recorded with this tracer may be pending on the GPU: the old scene
     /// buffers are destroyed here.
+    ///
+    /// With the ray-query backend, `tree` is not used: the driver's structures
+    /// are built anew over `triangles`.
     pub fn replace_scene(&mut self, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<()> {
-        self.scene = SceneBuffers::upload(&self.ctx, tree, triangles)?;
+        self.scene = match self.scene {
+            TracerScene::KdTree(_) => TracerScene::KdTree(Box::new(SceneBuffers::upload(&self.ctx, tree, triangles)?)),
+            TracerScene::RayQuery(_) => TracerScene::RayQuery(Box::new(RayQueryScene::upload(&self.ctx, triangles)?)),
+        };
         self.generation += 1;
         Ok(())
+    }
+
+    /// The backend this tracer traces with.
+    pub fn backend(&self) -> Backend {
+        match self.scene {
+            TracerScene::KdTree(_) => Backend::KdTree,
+            TracerScene::RayQuery(_) => Backend::RayQuery,
+        }
     }
 
     /// The context this tracer runs on.
@@ -345,12 +585,15 @@ impl Tracer {
 
     /// The box around the scene's triangles (rays are clipped to it).
     pub fn bounds(&self) -> Aabb {
-        self.scene.bounds
+        self.scene.bounds()
     }
 
     /// Triangles of the scene this tracer holds.
     pub fn triangle_count(&self) -> usize {
-        self.scene.triangle_count
+        match &self.scene {
+            TracerScene::KdTree(s) => s.triangle_count,
+            TracerScene::RayQuery(s) => s.triangle_count,
+        }
     }
 
     /// Rays traced per dispatch.
@@ -363,24 +606,41 @@ impl Tracer {
         self.chunk = rays.clamp(1, self.chunk.max(1));
     }
 
+    /// Takes over pipelines compiled in advance ([`TracePipelines`]) for the
+    /// same context; those it already has are kept (bindings stay valid).
+    ///
+    /// Errors: `Error::InvalidInput` when they were compiled for another context.
+    pub fn adopt_pipelines(&mut self, pipelines: TracePipelines) -> Result<()> {
+        if !Arc::ptr_eq(&self.ctx, &pipelines.ctx) {
+            return Err(Error::InvalidInput("trace pipelines of another Vulkan context".into()));
+        }
+        for (key, kernels) in pipelines.kernels {
+            if !self.pipelines.kernels.iter().any(|(k, _)| *k == key) {
+                self.pipelines.kernels.push((key, kernels));
+            }
+        }
+        Ok(())
+    }
+
     /// Compiles the pipeline of `options` and, for `backtrack` and `ropes`, uploads
     /// their side buffers (parent links, node boxes, ropes; Foley & Sugerman 2005,
     /// Popov et al. 2007), which submits on the context's queue and waits. Call it
     /// at load time so that [`Tracer::record_trace`] finds everything ready.
     pub fn prepare(&mut self, options: &TraceOptions) -> Result<()> {
-        self.kernel(options.traversal, options.counters)?;
+        self.pipelines.kernel(self.backend(), options.traversal, options.counters)?;
         if options.traversal.variant.uses_links() {
             self.ensure_links()?;
         }
         Ok(())
     }
 
-    /// Uploads the side buffers of `backtrack` and `ropes` once.
+    /// Uploads the side buffers of `backtrack` and `ropes` once (kd-tree backend).
     fn ensure_links(&mut self) -> Result<()> {
-        if self.scene.links.is_some() {
+        let TracerScene::KdTree(scene) = &mut self.scene else { return Ok(()) };
+        if scene.links.is_some() {
             return Ok(());
         }
-        let links = TreeLinks::new(&self.scene.host_nodes, self.scene.bounds);
+        let links = TreeLinks::new(&scene.host_nodes, scene.bounds);
         let limit = self.ctx.info.max_storage_buffer_range;
         if std::mem::size_of_val(links.boxes.as_slice()) as u64 > limit {
             return Err(Error::DeviceLimit(format!(
@@ -389,82 +649,12 @@ impl Tracer {
             )));
         }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        self.scene.links = Some([
+        scene.links = Some([
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.parents), usage, "parents")?,
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.boxes), usage, "node boxes")?,
             Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.ropes), usage, "ropes")?,
         ]);
         Ok(())
-    }
-
-    fn kernel(&mut self, traversal: Traversal, counters: bool) -> Result<usize> {
-        traversal.validate()?;
-        // Variants that ignore the stack size or packets share one pipeline.
-        let key = Traversal {
-            stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
-            packet_width: if traversal.uses_packets() { traversal.packet_width } else { 1 },
-            ..traversal
-        };
-        let subgroup = key.subgroup_size.unwrap_or(self.ctx.info.subgroup_size);
-        if key.packet_width > subgroup || TRACE_WORKGROUP_SIZE % subgroup != 0 {
-            return Err(Error::DeviceLimit(format!(
-                "packet width {} needs subgroups of at least that many lanes (and dividing the workgroup of {}); {} runs subgroups of {}",
-                key.packet_width, TRACE_WORKGROUP_SIZE, self.ctx.info.name, subgroup
-            )));
-        }
-        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == (key, counters)) {
-            return Ok(i);
-        }
-        let desc = KernelDesc {
-            name: "trace",
-            spirv: shaders::TRACE,
-            bindings: TRACE_BINDINGS,
-            push_constant_size: std::mem::size_of::<TraceParams>() as u32,
-            spec_constants: &[],
-            workgroup_size: TRACE_WORKGROUP_SIZE,
-            required_subgroup_size: key.subgroup_size,
-            texel_buffers: &[
-                (BINDING_NODES, vk::Format::R32G32_UINT),
-                (BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
-            ],
-            // Packets decide by ballots.
-            required_subgroup_operations: if key.packet_width > 1 {
-                vk::SubgroupFeatureFlags::BASIC | vk::SubgroupFeatureFlags::BALLOT
-            } else {
-                vk::SubgroupFeatureFlags::empty()
-            },
-        };
-        let spec = |pass: u32| {
-            [
-                key.variant.id(),
-                counters as u32,
-                key.stack_size,
-                key.any_hit as u32,
-                key.packet_width,
-                key.robust as u32,
-                pass,
-            ]
-        };
-        let kernels = if key.robust && !key.uses_packets() {
-            // Robust single rays: the fast and the careful pass, compiled side by side.
-            let (fast_spec, careful_spec) = (spec(PASS_FAST), spec(PASS_CAREFUL));
-            let ctx = &self.ctx;
-            let (main, careful) = std::thread::scope(|s| {
-                let careful =
-                    s.spawn(|| Kernel::new(ctx, &KernelDesc { spec_constants: &careful_spec, ..desc.clone() }));
-                let main = Kernel::new(ctx, &KernelDesc { spec_constants: &fast_spec, ..desc.clone() });
-                (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-            });
-            TraceKernels { main: main?, careful: Some(careful?) }
-        } else {
-            let one = spec(PASS_ONE);
-            TraceKernels {
-                main: Kernel::new(&self.ctx, &KernelDesc { spec_constants: &one, ..desc.clone() })?,
-                careful: None,
-            }
-        };
-        self.kernels.push(((key, counters), kernels));
-        Ok(self.kernels.len() - 1)
     }
 
     /// Makes the descriptor set that traces rays from `rays` into `hits` (and
@@ -515,9 +705,9 @@ impl Tracer {
             }
             _ => {}
         }
-        let kernel = self.kernel(options.traversal, options.counters)?;
-        let uses_links = options.traversal.variant.uses_links();
-        if uses_links && self.scene.links.is_none() {
+        let kernel = self.pipelines.kernel(self.backend(), options.traversal, options.counters)?;
+        let uses_links = self.backend() == Backend::KdTree && options.traversal.variant.uses_links();
+        if uses_links && matches!(&self.scene, TracerScene::KdTree(s) if s.links.is_none()) {
             if !upload {
                 return Err(Error::InvalidInput(format!(
                     "the {} traversal needs side buffers that are not uploaded yet, and recording never submits: \
@@ -562,7 +752,30 @@ impl Tracer {
             )));
         }
 
-        let scene = &self.scene;
+        let capacity = capacity.min(u32::MAX as u64) as u32;
+        let scene = match &self.scene {
+            TracerScene::KdTree(scene) => scene,
+            TracerScene::RayQuery(scene) => {
+                let k = &self.pipelines.kernels[kernel].1;
+                let mut bindings = [Binding::Buffer(rays); RQ_BINDINGS as usize];
+                bindings[RQ_BINDING_SCENE as usize] = Binding::AccelerationStructure(scene.accel.top_level());
+                bindings[RQ_BINDING_PRIM_IDS as usize] = Binding::Buffer(BufferRange::whole(&scene.prim_ids));
+                bindings[RQ_BINDING_RAYS as usize] = Binding::Buffer(rays);
+                bindings[RQ_BINDING_HITS as usize] = Binding::Buffer(hits);
+                // SAFETY: the structures and the prim-id buffer are this tracer's;
+                // the caller vouches for `rays` and `hits`.
+                let set = unsafe { BufferSet::from_bindings(&self.ctx, &k.main, &bindings)? };
+                return Ok(TraceBinding {
+                    set,
+                    careful: None,
+                    kernel,
+                    pipeline: k.main.pipeline,
+                    generation: self.generation,
+                    capacity,
+                    options: *options,
+                });
+            }
+        };
         let mut ranges = [BufferRange::whole(&self.dummy); TRACE_BINDINGS as usize];
         ranges[BINDING_NODES as usize] = BufferRange::whole(&scene.nodes);
         ranges[BINDING_PRIM_INDICES as usize] = BufferRange::whole(&scene.prim_indices);
@@ -577,8 +790,7 @@ impl Tracer {
             ranges[BINDING_NODE_BOXES as usize] = BufferRange::whole(boxes);
             ranges[BINDING_ROPES as usize] = BufferRange::whole(ropes);
         }
-        let k = &self.kernels[kernel].1;
-        let capacity = capacity.min(u32::MAX as u64) as u32;
+        let k = &self.pipelines.kernels[kernel].1;
         let careful = match k.careful {
             Some(_) => {
                 let bytes = (CAREFUL_HEADER_WORDS as u64 + capacity as u64) * 4;
@@ -609,7 +821,7 @@ impl Tracer {
     /// The kernel of `binding`, after checking it belongs to this tracer's current
     /// scene and holds `count` rays.
     fn check_binding(&self, binding: &TraceBinding, count: u32) -> Result<&TraceKernels> {
-        let kernel = match self.kernels.get(binding.kernel) {
+        let kernel = match self.pipelines.kernels.get(binding.kernel) {
             Some((_, k)) if k.main.pipeline == binding.pipeline => k,
             _ => return Err(Error::InvalidInput("the binding was made by another tracer".into())),
         };
@@ -640,7 +852,7 @@ impl Tracer {
         binding: &TraceBinding,
         count: u32,
     ) {
-        let b = self.scene.bounds;
+        let b = self.scene.bounds();
         let params = TraceParams {
             scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
             scene_max: [b.max.x, b.max.y, b.max.z, 0.0],

@@ -443,3 +443,62 @@ fn subgroups_writes_table_csv_and_chart() {
     assert!(rows.iter().any(|r| r.starts_with("camera,")) && rows.iter().any(|r| r.starts_with("random,")), "{text}");
     assert!(image::open(&png).unwrap().width() > 100);
 }
+
+/// `--builder` picks the split search on `trace` (and `stats`): each tree's
+/// hits equal the library's with the same configuration, bit for bit; and
+/// `--timings` prints every stage of the command.
+#[test]
+fn trace_builder_choice_and_stage_timings() {
+    use kdtrace::kdtree::{BuildConfig, Builder, KdTree};
+    use kdtrace::trace::{TraceOptions, Tracer};
+    let Some(path) = common::fetched_scene("bunny.obj") else { return };
+    let scene = kdtrace::scene::Scene::load(&path).unwrap();
+    let ray_file = temp("bunny-builders.rays");
+    let o =
+        kdtrace(&["rays", path.to_str().unwrap(), "-o", ray_file.to_str().unwrap(), "--width", "48", "--height", "36"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rays = kdtrace::io::read_rays(&ray_file).unwrap();
+    let ctx = common::context();
+    for (name, builder) in [("sweep", Builder::Sweep), ("binned", Builder::BINNED)] {
+        let config = BuildConfig { builder, ..BuildConfig::default() };
+        let tree = KdTree::build(&scene.triangles, &config);
+        let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+        let library = tracer.trace(&rays, &TraceOptions::default()).unwrap().hits;
+        let hit_file = temp(&format!("bunny-{name}.hits"));
+        let o = kdtrace(&[
+            "trace",
+            path.to_str().unwrap(),
+            ray_file.to_str().unwrap(),
+            "-o",
+            hit_file.to_str().unwrap(),
+            "--builder",
+            name,
+            "--timings",
+        ]);
+        let err = stderr(&o);
+        assert!(o.status.success(), "{err}");
+        for stage in [
+            "parse and check the OBJ",
+            "kd-tree",
+            "wait for the device",
+            "device and pipelines, beside the above",
+            "upload the scene",
+            "trace",
+            "total",
+        ] {
+            assert!(err.contains(stage), "no stage '{stage}' in:\n{err}");
+        }
+        let written = kdtrace::io::read_hits(&hit_file).unwrap();
+        assert_eq!(written.len(), library.len());
+        for (i, (a, b)) in written.iter().zip(&library).enumerate() {
+            assert!(bytemuck::bytes_of(a) == bytemuck::bytes_of(b), "{name}: ray {i}: file {a:?}, library {b:?}");
+        }
+        let o = kdtrace(&["stats", path.to_str().unwrap(), "--json", "--builder", name]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        let nodes = format!("\"nodes\":{},", tree.nodes.len());
+        assert!(text.contains(&nodes) && text.contains(&format!("\"builder\":\"{name}")), "{text}");
+    }
+    let o = kdtrace(&["stats", path.to_str().unwrap(), "--builder", "binned", "--bins", "1"]);
+    assert!(!o.status.success() && stderr(&o).contains("--bins"), "{}", stderr(&o));
+    common::assert_validation_clean(&ctx);
+}

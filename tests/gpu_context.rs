@@ -81,7 +81,8 @@ fn validation_messages_are_caught() {
 
 #[test]
 fn unknown_device_is_a_clear_error() {
-    let options = ContextOptions { device: Some("no-such-device-xyz".into()), validation: Validation::Off };
+    let options =
+        ContextOptions { device: Some("no-such-device-xyz".into()), validation: Validation::Off, ray_query: false };
     match GpuContext::headless(&options) {
         Err(Error::NoDevice(message)) => assert!(message.contains("no-such-device-xyz"), "{message}"),
         Err(e) => panic!("unexpected error: {e}"),
@@ -91,7 +92,7 @@ fn unknown_device_is_a_clear_error() {
 
 #[test]
 fn device_by_index_and_buffers_round_trip() {
-    let options = ContextOptions { device: Some("0".into()), validation: Validation::IfAvailable };
+    let options = ContextOptions { device: Some("0".into()), validation: Validation::IfAvailable, ray_query: false };
     let ctx = GpuContext::headless(&options).unwrap();
     let mut upload =
         Buffer::new(&ctx, 1024, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::CpuToGpu, "upload").unwrap();

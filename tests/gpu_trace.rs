@@ -230,3 +230,32 @@ fn invalid_and_empty_rays_are_flagged_not_traced() {
     drop(tracer);
     assert_validation_clean(&ctx);
 }
+
+/// Pipelines compiled before the scene exists (as the CLI does while the tree
+/// builds) are adopted by the tracer and give the same hits; pipelines of
+/// another context are refused.
+#[test]
+fn pipelines_compiled_in_advance_are_adopted() {
+    use kdtrace::trace::{Backend, TracePipelines};
+    let ctx = context();
+    let scene = Scene::load(&scene_path("teapot.obj")).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let rays = random_rays(&mut Rng(7), scene.bounds.min, scene.bounds.max, 500);
+    let options = TraceOptions::default();
+    let mut pipelines = TracePipelines::new(&ctx);
+    pipelines.prepare(Backend::KdTree, &options).unwrap();
+    let mut adopted = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    adopted.adopt_pipelines(pipelines).unwrap();
+    let mut fresh = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let (a, b) = (adopted.trace(&rays, &options).unwrap().hits, fresh.trace(&rays, &options).unwrap().hits);
+    assert_eq!(a.len(), b.len());
+    assert!(a.iter().zip(&b).all(|(x, y)| same_bits(x, y)));
+
+    let other = common::context();
+    assert!(!Arc::ptr_eq(&ctx, &other), "the test needs two contexts");
+    let err = fresh.adopt_pipelines(TracePipelines::new(&other)).unwrap_err();
+    assert!(err.to_string().contains("another Vulkan context"), "{err}");
+    drop((adopted, fresh));
+    assert_validation_clean(&ctx);
+    assert_validation_clean(&other);
+}

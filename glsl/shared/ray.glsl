@@ -26,7 +26,7 @@ struct TraceParams {
     vec4 scene_min;   // xyz: scene box
     vec4 scene_max;
     uint ray_count;   // rays in this dispatch
-    uint pad0;
+    uint pad0;        // 0 (trace.comp uses it as a zero the compiler cannot fold)
     uint pad1;
     uint pad2;
 };

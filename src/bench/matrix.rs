@@ -18,22 +18,27 @@ use crate::geom::{Hit, Ray};
 use crate::gpu::GpuContext;
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{trace_ray, Counters, SceneRef, Traversal, Variant};
-use crate::kdtree::{BuildConfig, KdTree};
+use crate::kdtree::{BuildConfig, Builder, KdTree};
 use crate::scene::{Camera, Scene};
 use crate::stress::{exact_answers, judge_with, Tally};
 use crate::trace::{TraceOptions, Tracer};
 
-/// The builder settings the matrix knows, by name.
-pub const BUILDERS: [(&str, BuildConfig); 3] =
-    [("default", BuildConfig::TUNED), ("pbrt-v3", BuildConfig::PBRT_V3), ("wald-havran", BuildConfig::WALD_HAVRAN)];
+/// The builder settings the matrix knows, by name: `sweep` is `default`'s
+/// costs with the exact sweep at every node (`default` bins the large ones).
+pub const BUILDERS: [(&str, BuildConfig); 4] = [
+    ("default", BuildConfig::TUNED),
+    ("sweep", BuildConfig { builder: Builder::Sweep, ..BuildConfig::TUNED }),
+    ("pbrt-v3", BuildConfig::PBRT_V3),
+    ("wald-havran", BuildConfig::WALD_HAVRAN),
+];
 
-/// The builder settings named `name` (`default`, `pbrt-v3`, `wald-havran`).
+/// The builder settings named `name` (`default`, `sweep`, `pbrt-v3`, `wald-havran`).
 pub fn builder_config(name: &str) -> Result<BuildConfig> {
     BUILDERS
         .iter()
         .find(|(n, _)| *n == name)
         .map(|(_, c)| *c)
-        .ok_or_else(|| Error::InvalidInput(format!("unknown builder '{name}' (default, pbrt-v3, wald-havran)")))
+        .ok_or_else(|| Error::InvalidInput(format!("unknown builder '{name}' (default, sweep, pbrt-v3, wald-havran)")))
 }
 
 /// Who traced a cell.
@@ -45,6 +50,9 @@ pub enum Backend {
     Cpu,
     /// Intel Embree 3, `rtcIntersect1`/`rtcOccluded1`, one thread or rayon over rays (wall clock).
     Embree,
+    /// The driver's ray query on the Vulkan device ([`crate::trace::Backend::RayQuery`]:
+    /// its own BVH, GPU timestamps), the peer on any device with `VK_KHR_ray_query`.
+    RayQuery,
 }
 
 impl Backend {
@@ -54,7 +62,13 @@ impl Backend {
             Backend::Gpu => "kdtrace-gpu",
             Backend::Cpu => "kdtrace-cpu",
             Backend::Embree => "embree",
+            Backend::RayQuery => "vk-ray-query",
         }
+    }
+
+    /// True for the backends that run on the Vulkan device (no CPU threads).
+    pub fn on_device(self) -> bool {
+        matches!(self, Backend::Gpu | Backend::RayQuery)
     }
 }
 
@@ -81,6 +95,9 @@ pub struct MatrixOptions {
     pub kinds: Vec<RayKind>,
     /// Run Embree too (needs the `embree` feature).
     pub embree: bool,
+    /// Run the driver's ray query too (a device with `VK_KHR_ray_query`): one
+    /// cell per ray kind, builder `driver-bvh`, no traversal settings or counters.
+    pub ray_query: bool,
     /// Seed of the random and diffuse rays.
     pub seed: u64,
 }
@@ -96,13 +113,15 @@ pub struct Cell {
     pub backend: Backend,
     /// CPU threads (0 for the GPU).
     pub threads: usize,
-    /// Builder settings name, or Embree's (`embree-bvh`, `embree-bvh-robust`).
+    /// Builder settings name, or Embree's (`embree-bvh`, `embree-bvh-robust`), or
+    /// `driver-bvh` for the ray query.
     pub builder: String,
-    /// The traversal (`None` for Embree); `any_hit` set for shadow rays.
+    /// The traversal (`None` for Embree and the ray query); `any_hit` set for shadow rays.
     pub traversal: Option<Traversal>,
     /// Rays traced.
     pub rays: usize,
-    /// Seconds to build the acceleration structure (kd-tree, or Embree's commit).
+    /// Seconds to build the acceleration structure (kd-tree, or Embree's commit,
+    /// or for the ray query the sort, upload and driver's build together).
     pub build_seconds: f64,
     /// Seconds to upload the scene to the device (GPU), 0 elsewhere.
     pub upload_seconds: f64,
@@ -116,12 +135,13 @@ pub struct Cell {
     /// Median seconds of the whole call: for the GPU with ray upload, submission,
     /// wait and readback.
     pub wall_seconds: f64,
-    /// Mean nodes, leaves and triangle tests per ray (`None` for Embree).
+    /// Mean nodes, leaves and triangle tests per ray (`None` for Embree and the ray query).
     pub counters: Option<[f64; 3]>,
     /// Verdicts on the judged sample.
     pub tally: Tally,
     /// Rays of the whole cell (not only the sample) that did not finish
-    /// traversal (`PRIM_INCOMPLETE`; 0 for Embree).
+    /// traversal (`PRIM_INCOMPLETE`; 0 for Embree; for the ray query, rays it
+    /// cannot pass to the driver).
     pub incomplete: usize,
     /// The baseline's median trace time over this cell's (same scene and rays); > 1 is faster.
     pub speedup: f64,
@@ -144,7 +164,7 @@ impl Cell {
         if let Some(t) = &self.traversal {
             s += &format!(" {}", traversal_name(t));
         }
-        if self.backend != Backend::Gpu {
+        if !self.backend.on_device() {
             s += &format!(" {}t", self.threads);
         }
         s += &format!(" {}", self.builder);
@@ -277,7 +297,7 @@ pub fn run_scene(
         scene: name.to_string(),
         kind,
         backend,
-        threads: if backend == Backend::Gpu { 0 } else { threads },
+        threads: if backend.on_device() { 0 } else { threads },
         builder: builder.to_string(),
         traversal: None,
         rays,
@@ -373,6 +393,13 @@ pub fn run_scene(
     }
     drop(tracer);
 
+    // The driver's ray query: its own acceleration structure, one cell per ray kind.
+    if let (Some(ctx), true) = (ctx, options.ray_query) {
+        cells.extend(run_ray_query(ctx, scene, &batches, options.repeat, &mut progress, |kind, rays| {
+            cell(kind, Backend::RayQuery, "driver-bvh", rays)
+        })?);
+    }
+
     #[cfg(feature = "embree")]
     if options.embree {
         cells.extend(run_embree(&scene.triangles, &batches, options.repeat, &mut progress, |kind, b, rays| {
@@ -381,6 +408,50 @@ pub fn run_scene(
     }
 
     set_speedups(&mut cells);
+    Ok(cells)
+}
+
+/// The driver's ray query on every batch, timed as the GPU cells are (GPU
+/// timestamps, median after a warm-up).
+fn run_ray_query(
+    ctx: &Arc<GpuContext>,
+    scene: &Scene,
+    batches: &[Batch],
+    repeat: usize,
+    progress: &mut impl FnMut(&str),
+    cell: impl Fn(RayKind, usize) -> Cell,
+) -> Result<Vec<Cell>> {
+    progress("ray query: building the driver's acceleration structures");
+    let start = Instant::now();
+    let mut tracer = Tracer::ray_query(ctx, &scene.triangles)?;
+    let build_seconds = start.elapsed().as_secs_f64();
+    let mut cells = Vec::new();
+    for batch in batches.iter().filter(|b| !b.rays.is_empty()) {
+        progress(&format!("ray query {} rays", batch.kind));
+        let options = TraceOptions {
+            traversal: Traversal { any_hit: batch.kind.any_hit(), ..Traversal::closest(Variant::Stack) },
+            counters: false,
+        };
+        let start = Instant::now();
+        tracer.prepare(&options)?;
+        let pipeline_seconds = start.elapsed().as_secs_f64();
+        let mut gpu_times = Vec::new();
+        let (result, wall) = timed(repeat, || {
+            let r = tracer.trace(&batch.rays, &options)?;
+            gpu_times.push(r.gpu_seconds.unwrap_or(f64::NAN));
+            Ok(r)
+        })?;
+        gpu_times.remove(0); // the warm-up
+        cells.push(Cell {
+            build_seconds,
+            pipeline_seconds,
+            trace_seconds: spread(gpu_times),
+            wall_seconds: wall[0],
+            tally: batch.judge(&scene.triangles, &result.hits),
+            incomplete: result.incomplete().len(),
+            ..cell(batch.kind, batch.rays.len())
+        });
+    }
     Ok(cells)
 }
 

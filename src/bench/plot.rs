@@ -71,6 +71,7 @@ fn backend_color(b: Backend) -> RGBColor {
         Backend::Gpu => RGBColor(31, 119, 180),
         Backend::Cpu => RGBColor(44, 160, 44),
         Backend::Embree => RGBColor(214, 39, 40),
+        Backend::RayQuery => RGBColor(148, 103, 189),
     }
 }
 
@@ -91,10 +92,11 @@ enum Family {
     GpuPlain,
     Cpu,
     Embree,
+    RayQuery,
 }
 
 impl Family {
-    const ALL: [Family; 4] = [Family::GpuRobust, Family::GpuPlain, Family::Cpu, Family::Embree];
+    const ALL: [Family; 5] = [Family::GpuRobust, Family::GpuPlain, Family::Cpu, Family::Embree, Family::RayQuery];
 
     fn of(c: &Cell) -> Family {
         match c.backend {
@@ -102,6 +104,7 @@ impl Family {
             Backend::Gpu => Family::GpuPlain,
             Backend::Cpu => Family::Cpu,
             Backend::Embree => Family::Embree,
+            Backend::RayQuery => Family::RayQuery,
         }
     }
 
@@ -111,6 +114,7 @@ impl Family {
             Family::GpuPlain => "kdtrace GPU, --plain",
             Family::Cpu => "kdtrace CPU twin",
             Family::Embree => "Embree",
+            Family::RayQuery => "driver's ray query",
         }
     }
 
@@ -120,6 +124,7 @@ impl Family {
             Family::GpuPlain => RGBColor(255, 127, 14),
             Family::Cpu => backend_color(Backend::Cpu),
             Family::Embree => backend_color(Backend::Embree),
+            Family::RayQuery => backend_color(Backend::RayQuery),
         }
     }
 }

@@ -69,11 +69,11 @@ pub fn markdown_table(cells: &[Cell]) -> String {
 }
 
 /// One row per scene and ray kind: the GPU `stack` (first builder, robust, single
-/// rays), the fastest GPU cell without serious errors, the CPU twin and Embree,
-/// in M rays/s, and the GPU `stack` against the baseline.
+/// rays), the fastest GPU cell without serious errors, the CPU twin, Embree and
+/// the driver's ray query in M rays/s, and the GPU `stack` against the baseline.
 pub fn summary_table(cells: &[Cell]) -> String {
     let mut out = String::from(
-        "| scene | rays | GPU stack M rays/s | fastest GPU without serious errors | CPU twin M rays/s | Embree M rays/s | GPU stack × baseline | serious errors (all cells) |\n|---|---|---|---|---|---|---|---|\n",
+        "| scene | rays | GPU stack M rays/s | fastest GPU without serious errors | CPU twin M rays/s | Embree M rays/s | ray query M rays/s | GPU stack × baseline | serious errors (all cells) |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut keys: Vec<(String, crate::bench::rays::RayKind)> = Vec::new();
     for c in cells {
@@ -102,15 +102,17 @@ pub fn summary_table(cells: &[Cell]) -> String {
             .copied()
             .filter(|c| c.backend == Backend::Embree && c.builder == "embree-bvh")
             .max_by_key(|c| c.threads);
+        let ray_query = group.iter().copied().find(|c| c.backend == Backend::RayQuery);
         let serious: usize = group.iter().map(|c| c.tally.serious()).sum();
         let _ = writeln!(
             out,
-            "| {scene} | {} {kind} | {} | {} | {} | {} | {} | {serious} |",
+            "| {scene} | {} {kind} | {} | {} | {} | {} | {} | {} | {serious} |",
             group.first().map_or(0, |c| c.rays),
             rate(stack),
             fastest.map_or("—".into(), |c| format!("{:.2} ({})", c.rays_per_second() / 1e6, c.label())),
             rate(cpu),
             rate(embree),
+            rate(ray_query),
             stack.map_or("—".into(), |c| format!("{:.2}", c.speedup)),
         );
     }

@@ -19,6 +19,7 @@ pub struct Buffer {
     pub buffer: vk::Buffer,
     /// Its size in bytes.
     pub size: u64,
+    usage: vk::BufferUsageFlags,
     allocation: Option<Allocation>,
     ctx: Arc<GpuContext>,
 }
@@ -104,7 +105,7 @@ impl Buffer {
             let _ = ctx.allocator().lock().unwrap_or_else(|p| p.into_inner()).free(allocation);
             return Err(Error::Vulkan { what: "vkBindBufferMemory", result });
         }
-        Ok(Buffer { buffer, size, allocation: Some(allocation), ctx: ctx.clone() })
+        Ok(Buffer { buffer, size, usage, allocation: Some(allocation), ctx: ctx.clone() })
     }
 
     /// A device-local storage buffer holding `data`, filled through a staging buffer.
@@ -120,6 +121,21 @@ impl Buffer {
             unsafe { ctx.device.cmd_copy_buffer(cmd, staging.buffer, buffer.buffer, &region) };
         })?;
         Ok(buffer)
+    }
+
+    /// The buffer's device address (`vkGetBufferDeviceAddress`), for acceleration
+    /// structure builds. The buffer must have been created with
+    /// `SHADER_DEVICE_ADDRESS` usage on a context with the ray-query backend
+    /// enabled (whose allocator gives memory device addresses); else an error.
+    pub fn device_address(&self) -> Result<vk::DeviceAddress> {
+        self.ctx.ray_query()?;
+        if !self.usage.contains(vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS) {
+            return Err(Error::InvalidInput("a device address of a buffer without SHADER_DEVICE_ADDRESS usage".into()));
+        }
+        let info = vk::BufferDeviceAddressInfo::default().buffer(self.buffer);
+        // SAFETY: a live buffer of this device, whose memory was allocated with the
+        // device-address flag (the allocator's `buffer_device_address`).
+        Ok(unsafe { self.ctx.device.get_buffer_device_address(&info) })
     }
 
     /// The mapped bytes of a host-visible buffer.

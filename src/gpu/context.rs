@@ -29,18 +29,25 @@ pub struct ContextOptions {
     pub device: Option<String>,
     /// Whether to enable the validation layer (and collect its messages).
     pub validation: Validation,
+    /// Enable the ray-query backend's extensions ([`RAY_QUERY_EXTENSIONS`]) and
+    /// features (`accelerationStructure`, `rayQuery`, `bufferDeviceAddress`, the
+    /// allocator's device addresses): `Error::DeviceLimit` naming what the device
+    /// lacks. Off, the device and allocator are created without them, exactly
+    /// as without the backend, so nothing changes for the kd-tree kernels.
+    pub ray_query: bool,
 }
 
 impl ContextOptions {
     /// Reads `KDTRACE_DEVICE` (index or name substring) and `KDTRACE_VALIDATION`
-    /// (`1` = if available, `required`, anything else = off).
+    /// (`1` = if available, `required`, anything else = off); the ray query off.
     pub fn from_env() -> Self {
         let validation = match std::env::var("KDTRACE_VALIDATION").as_deref() {
             Ok("1") | Ok("on") => Validation::IfAvailable,
             Ok("required") => Validation::Required,
             _ => Validation::Off,
         };
-        ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok().filter(|s| !s.is_empty()), validation }
+        let device = std::env::var("KDTRACE_DEVICE").ok().filter(|s| !s.is_empty());
+        ContextOptions { device, validation, ray_query: false }
     }
 }
 
@@ -79,6 +86,10 @@ pub struct DeviceInfo {
     pub max_memory_allocation_size: u64,
     /// Nanoseconds per timestamp tick; `None` when the queue has no timestamps.
     pub timestamp_period_ns: Option<f64>,
+    /// What the device lacks of the ray-query backend's extensions and features
+    /// ([`RAY_QUERY_EXTENSIONS`], `accelerationStructure`, `rayQuery`,
+    /// `bufferDeviceAddress`); empty when it has them all.
+    pub ray_query_missing: Vec<String>,
 }
 
 impl std::fmt::Display for DeviceInfo {
@@ -139,6 +150,11 @@ pub struct AdoptDesc {
     /// Whether `subgroupSizeControl` and `computeFullSubgroups` were enabled
     /// (Vulkan 1.3 features). Only kernels that require a subgroup size need them.
     pub subgroup_size_control: bool,
+    /// Whether the device was created with the ray-query backend's extensions
+    /// ([`RAY_QUERY_EXTENSIONS`]) and the features `accelerationStructure`,
+    /// `rayQuery` and `bufferDeviceAddress`, and the allocator with
+    /// `buffer_device_address: true`. Only the ray-query backend needs them.
+    pub ray_query: bool,
 }
 
 impl std::fmt::Debug for AdoptDesc {
@@ -152,6 +168,7 @@ impl std::fmt::Debug for AdoptDesc {
             .field("queue_lock", &self.queue_lock.is_some())
             .field("enabled_features", &self.enabled_features)
             .field("subgroup_size_control", &self.subgroup_size_control)
+            .field("ray_query", &self.ray_query)
             .finish_non_exhaustive()
     }
 }
@@ -161,6 +178,24 @@ impl std::fmt::Debug for AdoptDesc {
 /// least these when you create a device for [`GpuContext::adopt`].
 pub fn required_features() -> vk::PhysicalDeviceFeatures {
     vk::PhysicalDeviceFeatures::default().shader_float64(true)
+}
+
+/// The device extensions of the ray-query backend: acceleration structures, ray
+/// queries in compute shaders, and the deferred host operations that
+/// `VK_KHR_acceleration_structure` requires. With them the backend needs the
+/// features `accelerationStructure`, `rayQuery` and `bufferDeviceAddress`.
+pub const RAY_QUERY_EXTENSIONS: [&CStr; 3] =
+    [ash::khr::acceleration_structure::NAME, ash::khr::ray_query::NAME, ash::khr::deferred_host_operations::NAME];
+
+/// The acceleration-structure functions and limits of a context whose device has
+/// the ray-query backend enabled.
+pub(crate) struct RayQueryDevice {
+    /// `VK_KHR_acceleration_structure`'s device functions.
+    pub loader: ash::khr::acceleration_structure::Device,
+    /// `minAccelerationStructureScratchOffsetAlignment`.
+    pub scratch_alignment: u64,
+    /// `maxPrimitiveCount`: the most triangles one bottom-level structure may hold.
+    pub max_primitive_count: u64,
 }
 
 /// A Vulkan device with one compute queue and a shared allocator: the device
@@ -197,6 +232,8 @@ pub struct GpuContext {
     debug: Option<Debug>,
     /// A draw was recorded on this context (see [`GpuContext::timestamps_unreliable`]).
     drew: std::sync::atomic::AtomicBool,
+    /// The ray-query backend's functions, when its extensions and features are enabled.
+    ray_query: Option<RayQueryDevice>,
 }
 
 unsafe extern "system" fn debug_callback(
@@ -351,13 +388,29 @@ impl GpuContext {
         let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(info.subgroup_size_control)
             .compute_full_subgroups(info.subgroup_size_control);
+        // The ray-query backend's extensions and features, when asked for.
+        let ray_query = options.ray_query;
+        if ray_query && !info.ray_query_missing.is_empty() {
+            return Err((Error::DeviceLimit(ray_query_lacking(&info)), debug));
+        }
+        let extensions: Vec<*const i8> =
+            if ray_query { RAY_QUERY_EXTENSIONS.iter().map(|e| e.as_ptr()).collect() } else { Vec::new() };
+        let mut features12 = vk::PhysicalDeviceVulkan12Features::default().buffer_device_address(true);
+        let mut acceleration =
+            vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default().acceleration_structure(true);
+        let mut query = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(true);
         let priorities = [1.0f32];
         let queue_infos =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];
-        let mut create_info =
-            vk::DeviceCreateInfo::default().queue_create_infos(&queue_infos).enabled_features(&enabled);
+        let mut create_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_infos)
+            .enabled_features(&enabled)
+            .enabled_extension_names(&extensions);
         if info.api_version >= vk::API_VERSION_1_3 {
             create_info = create_info.push_next(&mut features13);
+        }
+        if ray_query {
+            create_info = create_info.push_next(&mut features12).push_next(&mut acceleration).push_next(&mut query);
         }
         // SAFETY: the create info and everything it points to outlive the call.
         let device = match unsafe { instance.create_device(physical_device, &create_info, None) } {
@@ -372,7 +425,7 @@ impl GpuContext {
             device: device.clone(),
             physical_device,
             debug_settings: Default::default(),
-            buffer_device_address: false,
+            buffer_device_address: ray_query,
             allocation_sizes: Default::default(),
         });
         let pool_info = vk::CommandPoolCreateInfo::default()
@@ -395,6 +448,7 @@ impl GpuContext {
             }
         };
 
+        let ray_query = ray_query.then(|| ray_query_device(&instance, physical_device, &device));
         Ok(GpuContext {
             _entry: Some(entry),
             instance,
@@ -409,6 +463,7 @@ impl GpuContext {
             command_pool: Mutex::new(pool),
             debug,
             drew: Default::default(),
+            ray_query,
         })
     }
 
@@ -441,6 +496,7 @@ impl GpuContext {
             allocator,
             enabled_features,
             subgroup_size_control,
+            ray_query,
         } = desc;
         // SAFETY: the caller vouches that `physical_device` belongs to `instance`.
         let families = unsafe { instance.get_physical_device_queue_family_properties(physical_device) };
@@ -484,6 +540,13 @@ impl GpuContext {
                 info.name
             )));
         }
+        if ray_query && !info.ray_query_missing.is_empty() {
+            return Err(Error::DeviceLimit(format!(
+                "AdoptDesc::ray_query is set, but {} lacks {}",
+                info.name,
+                info.ray_query_missing.join(", ")
+            )));
+        }
         // Size control counts only when the engine enabled it as well.
         if !subgroup_size_control {
             info.subgroup_size_control = false;
@@ -495,6 +558,7 @@ impl GpuContext {
             .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
         // SAFETY: a valid create info on the caller's live device.
         let pool = unsafe { device.create_command_pool(&pool_info, None) }.vk("vkCreateCommandPool")?;
+        let ray_query = ray_query.then(|| ray_query_device(&instance, physical_device, &device));
         Ok(Arc::new(GpuContext {
             _entry: None,
             instance,
@@ -509,6 +573,7 @@ impl GpuContext {
             command_pool: Mutex::new(pool),
             debug: None,
             drew: Default::default(),
+            ray_query,
         }))
     }
 
@@ -528,6 +593,33 @@ impl GpuContext {
     /// ([`GpuContext::adopt`]); false for a headless context.
     pub fn is_adopted(&self) -> bool {
         !self.owned
+    }
+
+    /// True when the ray-query backend's extensions and features are enabled on
+    /// this context's device: [`ContextOptions::ray_query`] for a headless
+    /// context, [`AdoptDesc::ray_query`] for an adopted one.
+    pub fn ray_query_enabled(&self) -> bool {
+        self.ray_query.is_some()
+    }
+
+    /// The ray-query backend's functions, or `Error::DeviceLimit` naming what the
+    /// device lacks (or that an adopted device was not created with it).
+    pub(crate) fn ray_query(&self) -> Result<&RayQueryDevice> {
+        if let Some(rq) = &self.ray_query {
+            return Ok(rq);
+        }
+        let info = &self.info;
+        Err(Error::DeviceLimit(if info.ray_query_missing.is_empty() {
+            format!(
+                "the ray-query backend needs {} with accelerationStructure, rayQuery and bufferDeviceAddress \
+                 enabled: {} has them, but this context was created without them \
+                 (ContextOptions::ray_query, or AdoptDesc::ray_query for an adopted device)",
+                extension_names(),
+                info.name
+            )
+        } else {
+            ray_query_lacking(info)
+        }))
     }
 
     /// The mutex kdtrace holds around each submission to [`GpuContext::queue`];
@@ -729,6 +821,68 @@ fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, family: u32) -> De
         max_memory_allocation_size: maint3.max_memory_allocation_size,
         timestamp_period_ns: (has_timestamps && props.limits.timestamp_compute_and_graphics != 0)
             .then_some(props.limits.timestamp_period as f64),
+        ray_query_missing: ray_query_missing(instance, pd, props.api_version),
+    }
+}
+
+/// The error message for a device without the ray-query backend: what it lacks.
+fn ray_query_lacking(info: &DeviceInfo) -> String {
+    format!(
+        "{} ({}) lacks {}, which the ray-query backend needs (lavapipe has them from Mesa 24 on; \
+         on Debian 12, tools/setup installs Mesa from bookworm-backports)",
+        info.name,
+        info.driver,
+        info.ray_query_missing.join(", ")
+    )
+}
+
+/// The ray-query extensions as one list, for messages.
+fn extension_names() -> String {
+    RAY_QUERY_EXTENSIONS.iter().map(|e| e.to_string_lossy()).collect::<Vec<_>>().join(", ")
+}
+
+/// What `pd` lacks of the ray-query backend: missing extensions, or else features.
+fn ray_query_missing(instance: &ash::Instance, pd: vk::PhysicalDevice, api_version: u32) -> Vec<String> {
+    // SAFETY: `pd` came from `instance`.
+    let available = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
+    let missing: Vec<String> = RAY_QUERY_EXTENSIONS
+        .iter()
+        .filter(|want| !available.iter().any(|e| e.extension_name_as_c_str() == Ok(**want)))
+        .map(|e| e.to_string_lossy().into_owned())
+        .collect();
+    if !missing.is_empty() || api_version < vk::API_VERSION_1_2 {
+        return missing;
+    }
+    // The extensions are there, so their feature structs may be queried.
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
+    let mut acceleration = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default();
+    let mut query = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
+    let mut f2 =
+        vk::PhysicalDeviceFeatures2::default().push_next(&mut f12).push_next(&mut acceleration).push_next(&mut query);
+    // SAFETY: as above; the chained structs live on this frame.
+    unsafe { instance.get_physical_device_features2(pd, &mut f2) };
+    [
+        ("bufferDeviceAddress", f12.buffer_device_address),
+        ("accelerationStructure", acceleration.acceleration_structure),
+        ("rayQuery", query.ray_query),
+    ]
+    .iter()
+    .filter(|(_, on)| *on == vk::FALSE)
+    .map(|(name, _)| name.to_string())
+    .collect()
+}
+
+/// The acceleration-structure functions and limits of `device`, created with the
+/// ray-query extensions from `pd`.
+fn ray_query_device(instance: &ash::Instance, pd: vk::PhysicalDevice, device: &ash::Device) -> RayQueryDevice {
+    let mut props = vk::PhysicalDeviceAccelerationStructurePropertiesKHR::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut props);
+    // SAFETY: `pd` came from `instance` and has the extension; the struct lives on this frame.
+    unsafe { instance.get_physical_device_properties2(pd, &mut props2) };
+    RayQueryDevice {
+        loader: ash::khr::acceleration_structure::Device::new(instance, device),
+        scratch_alignment: u64::from(props.min_acceleration_structure_scratch_offset_alignment).max(1),
+        max_primitive_count: props.max_primitive_count,
     }
 }
 

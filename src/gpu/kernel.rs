@@ -21,6 +21,8 @@ pub struct Kernel {
     pub bindings: u32,
     /// Bindings that are uniform texel buffers, with their view formats.
     pub texel_buffers: Vec<(u32, vk::Format)>,
+    /// Bindings that are acceleration structures (ray queries).
+    pub acceleration_structures: Vec<u32>,
     /// Bytes of push constants (0: none).
     pub push_constant_size: u32,
     /// The kernel's `local_size_x`.
@@ -51,6 +53,10 @@ pub struct KernelDesc<'a> {
     /// Bindings that are uniform texel buffers (`usamplerBuffer` etc.) instead of
     /// storage buffers, with the format of the view a [`BufferSet`] makes for them.
     pub texel_buffers: &'a [(u32, vk::Format)],
+    /// Bindings that are acceleration structures (`accelerationStructureEXT` of
+    /// ray queries: the device needs the ray-query backend enabled), bound by
+    /// [`BufferSet::from_bindings`] with [`Binding::AccelerationStructure`].
+    pub acceleration_structures: &'a [u32],
 }
 
 impl Kernel {
@@ -65,11 +71,20 @@ impl Kernel {
                 desc.name, desc.bindings
             )));
         }
+        if let Some(b) = desc.acceleration_structures.iter().find(|&&b| b >= desc.bindings) {
+            return Err(Error::InvalidInput(format!(
+                "kernel {}: acceleration-structure binding {b} is not below its {} bindings",
+                desc.name, desc.bindings
+            )));
+        }
+        if !desc.acceleration_structures.is_empty() {
+            ctx.ray_query()?;
+        }
         let bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..desc.bindings)
             .map(|b| {
                 vk::DescriptorSetLayoutBinding::default()
                     .binding(b)
-                    .descriptor_type(descriptor_type(desc.texel_buffers, b))
+                    .descriptor_type(descriptor_type(desc.texel_buffers, desc.acceleration_structures, b))
                     .descriptor_count(1)
                     .stage_flags(vk::ShaderStageFlags::COMPUTE)
             })
@@ -161,6 +176,7 @@ impl Kernel {
                 set_layout,
                 bindings: desc.bindings,
                 texel_buffers: desc.texel_buffers.to_vec(),
+                acceleration_structures: desc.acceleration_structures.to_vec(),
                 push_constant_size: desc.push_constant_size,
                 workgroup_size: desc.workgroup_size.max(1),
                 ctx: ctx.clone(),
@@ -237,13 +253,26 @@ impl Drop for Kernel {
     }
 }
 
-/// The descriptor type of `binding`: a uniform texel buffer when `texel_buffers` names it.
-fn descriptor_type(texel_buffers: &[(u32, vk::Format)], binding: u32) -> vk::DescriptorType {
+/// The descriptor type of `binding`: a uniform texel buffer when `texel_buffers`
+/// names it, an acceleration structure when `structures` does, else a storage buffer.
+fn descriptor_type(texel_buffers: &[(u32, vk::Format)], structures: &[u32], binding: u32) -> vk::DescriptorType {
     if texel_buffers.iter().any(|(b, _)| *b == binding) {
         vk::DescriptorType::UNIFORM_TEXEL_BUFFER
+    } else if structures.contains(&binding) {
+        vk::DescriptorType::ACCELERATION_STRUCTURE_KHR
     } else {
         vk::DescriptorType::STORAGE_BUFFER
     }
+}
+
+/// What one binding of a [`BufferSet`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Binding {
+    /// A storage or texel buffer range.
+    Buffer(BufferRange),
+    /// A (top-level) acceleration structure, for the kernel's
+    /// [`KernelDesc::acceleration_structures`] bindings.
+    AccelerationStructure(vk::AccelerationStructureKHR),
 }
 
 /// Bytes per texel of the view formats kernels use.
@@ -286,24 +315,57 @@ impl BufferSet {
     /// bindings) and at least `offset + range` bytes, bound to memory,
     /// and stay alive while the set is used by any command buffer.
     pub unsafe fn from_ranges(ctx: &Arc<GpuContext>, kernel: &Kernel, ranges: &[BufferRange]) -> Result<BufferSet> {
-        if ranges.len() as u32 != kernel.bindings {
+        let bindings: Vec<Binding> = ranges.iter().map(|&r| Binding::Buffer(r)).collect();
+        // SAFETY: forwarded from the caller.
+        unsafe { Self::from_bindings(ctx, kernel, &bindings) }
+    }
+
+    /// A set for `kernel` with `bindings[i]` bound at binding `i`: buffer ranges
+    /// (checked as [`BufferSet::from_ranges`] checks them) and, at the kernel's
+    /// acceleration-structure bindings, acceleration structures.
+    ///
+    /// # Safety
+    /// As [`BufferSet::from_ranges`] for the ranges; each acceleration structure
+    /// must be a live top-level acceleration structure of this device, built
+    /// before the set is used and alive while any command buffer uses the set.
+    pub unsafe fn from_bindings(ctx: &Arc<GpuContext>, kernel: &Kernel, bindings: &[Binding]) -> Result<BufferSet> {
+        if bindings.len() as u32 != kernel.bindings {
             return Err(Error::InvalidInput(format!(
                 "kernel has {} bindings, {} buffers given",
                 kernel.bindings,
-                ranges.len()
+                bindings.len()
             )));
         }
-        for (binding, r) in ranges.iter().enumerate() {
-            match kernel.texel_buffers.iter().find(|(b, _)| *b == binding as u32) {
-                Some(&(_, format)) => check_texel_range(ctx, &format!("binding {binding}"), r, format)?,
-                None => check_range(ctx, &format!("binding {binding}"), r)?,
+        // Every binding of the right kind; buffer ranges checked against the limits.
+        let mut ranges = Vec::with_capacity(bindings.len());
+        for (binding, b) in bindings.iter().enumerate() {
+            let structure = kernel.acceleration_structures.contains(&(binding as u32));
+            match (b, structure) {
+                (Binding::Buffer(r), false) => {
+                    match kernel.texel_buffers.iter().find(|(b, _)| *b == binding as u32) {
+                        Some(&(_, format)) => check_texel_range(ctx, &format!("binding {binding}"), r, format)?,
+                        None => check_range(ctx, &format!("binding {binding}"), r)?,
+                    }
+                    ranges.push(*r);
+                }
+                (Binding::AccelerationStructure(a), true) if *a != vk::AccelerationStructureKHR::null() => {
+                    ranges.push(BufferRange::new(vk::Buffer::null(), 0, 0));
+                }
+                _ => {
+                    return Err(Error::InvalidInput(format!(
+                        "binding {binding}: {} expected, got {b:?}",
+                        if structure { "an acceleration structure" } else { "a buffer range" }
+                    )))
+                }
             }
         }
         let device = &ctx.device;
         let texel_count = kernel.texel_buffers.len() as u32;
+        let structure_count = kernel.acceleration_structures.len() as u32;
         let sizes: Vec<vk::DescriptorPoolSize> = [
-            (vk::DescriptorType::STORAGE_BUFFER, kernel.bindings - texel_count),
+            (vk::DescriptorType::STORAGE_BUFFER, kernel.bindings - texel_count - structure_count),
             (vk::DescriptorType::UNIFORM_TEXEL_BUFFER, texel_count),
+            (vk::DescriptorType::ACCELERATION_STRUCTURE_KHR, structure_count),
         ]
         .into_iter()
         .filter(|&(_, n)| n > 0)
@@ -360,11 +422,29 @@ impl BufferSet {
                 .iter()
                 .map(|r| [vk::DescriptorBufferInfo { buffer: r.buffer, offset: r.offset, range: r.range }])
                 .collect();
+            let structures: Vec<[vk::AccelerationStructureKHR; 1]> = bindings
+                .iter()
+                .map(|b| match b {
+                    Binding::AccelerationStructure(a) => [*a],
+                    Binding::Buffer(_) => [vk::AccelerationStructureKHR::null()],
+                })
+                .collect();
+            let mut structure_writes: Vec<vk::WriteDescriptorSetAccelerationStructureKHR> = structures
+                .iter()
+                .map(|a| vk::WriteDescriptorSetAccelerationStructureKHR::default().acceleration_structures(a))
+                .collect();
             let writes: Vec<vk::WriteDescriptorSet> = infos
                 .iter()
+                .zip(structure_writes.iter_mut())
                 .enumerate()
-                .map(|(i, info)| {
+                .map(|(i, (info, structure))| {
                     let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(i as u32);
+                    if kernel.acceleration_structures.contains(&(i as u32)) {
+                        return write
+                            .descriptor_type(vk::DescriptorType::ACCELERATION_STRUCTURE_KHR)
+                            .descriptor_count(1)
+                            .push_next(structure);
+                    }
                     match views.iter().find(|(b, _)| *b == i as u32) {
                         Some((_, view)) => {
                             write.descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER).texel_buffer_view(view)

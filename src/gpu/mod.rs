@@ -1,15 +1,21 @@
 //! The only module that calls Vulkan: the device context (headless, or adopted
-//! from an engine), buffers, kernels, timestamps, and the rasterizer of first hits. Every `unsafe` block carries a
+//! from an engine), buffers, kernels, timestamps, the rasterizer of first hits, and
+//! the driver's acceleration structures for ray queries. Every `unsafe` block carries a
 //! `// SAFETY:` line.
+mod accel;
 mod buffer;
 mod context;
 mod kernel;
 mod raster;
 
+pub use accel::TriangleAccel;
 pub use buffer::{Buffer, BufferRange};
-pub use context::{list_devices, required_features, AdoptDesc, ContextOptions, DeviceInfo, GpuContext, Validation};
+pub use context::{
+    list_devices, required_features, AdoptDesc, ContextOptions, DeviceInfo, GpuContext, Validation,
+    RAY_QUERY_EXTENSIONS,
+};
 pub(crate) use kernel::check_range;
-pub use kernel::{BufferSet, Kernel, KernelDesc, Timestamps};
+pub use kernel::{Binding, BufferSet, Kernel, KernelDesc, Timestamps};
 pub use raster::{RasterView, Rasterizer};
 
 /// SPIR-V of the kernels in `glsl/`, compiled by build.rs, and the GLSL header

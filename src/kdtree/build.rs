@@ -16,6 +16,7 @@
 mod clip;
 mod sah;
 
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::time::Instant;
 
 use glam::Vec3;
@@ -81,6 +82,32 @@ pub struct BuildConfig {
     /// pbrt-v3 does), which keeps triangles in cells they do not touch: more
     /// references, larger leaves, more triangle tests per ray.
     pub perfect_splits: bool,
+    /// How the split of each node is chosen: the exact sweep everywhere, or
+    /// binned SAH on the large nodes at the top and the sweep below.
+    pub builder: Builder,
+}
+
+/// The split search of the SAH builder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Builder {
+    /// Wald & Havran 2006's exact O(N log N) sweep at every node: the SAH's
+    /// minimum over every face of every (clipped) triangle box.
+    Sweep,
+    /// Binned SAH (Shevtsov, Soupikov & Kapustin 2007) on nodes of at least
+    /// `min_prims` triangles, `bins` equally spaced planes per axis; the exact
+    /// sweep on smaller nodes. Faster: the large nodes keep no sorted event
+    /// lists. See docs/BUILDER.md for the quality it costs.
+    Binned {
+        /// Planes per axis plus one (at least 2).
+        bins: u32,
+        /// Nodes with at least this many triangles are binned.
+        min_prims: u32,
+    },
+}
+
+impl Builder {
+    /// The binned builder with the measured defaults (docs/BUILDER.md).
+    pub const BINNED: Builder = Builder::Binned { bins: 64, min_prims: 4096 };
 }
 
 impl BuildConfig {
@@ -94,6 +121,7 @@ impl BuildConfig {
         max_leaf_prims: 1,
         max_bad_refines: 2,
         perfect_splits: true,
+        builder: Builder::Sweep,
     };
 
     /// The default, chosen by measurement (docs/BUILDER.md): Wald & Havran's
@@ -103,6 +131,10 @@ impl BuildConfig {
     /// lie within about 1 % of each other on the shared scenes (pbrt-v3's are
     /// 26 % higher); this one is on that plateau with the fewest nodes (less
     /// than half of Wald & Havran's), so it builds fastest and takes least memory.
+    /// Its splits are binned on the nodes of 4096 triangles or more
+    /// ([`Builder::BINNED`]), which builds faster at the same node visits plus
+    /// triangle tests per ray (within 1.1 %, docs/BUILDER.md); set `builder`
+    /// to [`Builder::Sweep`] for the exact sweep everywhere.
     pub const TUNED: BuildConfig = BuildConfig {
         traversal_cost: 30.0,
         intersection_cost: 20.0,
@@ -111,6 +143,7 @@ impl BuildConfig {
         max_leaf_prims: 1,
         max_bad_refines: 0,
         perfect_splits: true,
+        builder: Builder::BINNED,
     };
 
     /// Wald & Havran 2006's costs: `K_T = 15, K_I = 20, λ = 0.8` (`b = 0.2`),
@@ -124,6 +157,7 @@ impl BuildConfig {
         max_leaf_prims: 1,
         max_bad_refines: 0,
         perfect_splits: true,
+        builder: Builder::Sweep,
     };
 
     /// The depth limit for `triangles` triangles: `max_depth`, or pbrt-v3's
@@ -141,6 +175,63 @@ impl Default for BuildConfig {
     /// The measured choice, [`BuildConfig::TUNED`] (docs/BUILDER.md).
     fn default() -> Self {
         BuildConfig::TUNED
+    }
+}
+
+/// How far a build has got, for a progress bar: shared with the building
+/// threads, read from any other (see [`KdTree::build_with_progress`]).
+#[derive(Debug, Default)]
+pub struct BuildProgress {
+    /// Progress units of the finished subtrees, out of [`BuildProgress::TOTAL`].
+    done: AtomicU64,
+    /// The [`BuildStage`] as a number.
+    stage: AtomicU8,
+}
+
+/// The stages of a build, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BuildStage {
+    /// Not started yet.
+    Waiting,
+    /// Triangle boxes, skipped triangles, the first sort of the events.
+    Preparing,
+    /// Choosing splits and building subtrees.
+    Splitting,
+    /// Walking the finished tree for its statistics.
+    Statistics,
+    /// Done.
+    Finished,
+}
+
+impl BuildProgress {
+    /// The progress units of a whole tree. Each node's share is divided
+    /// between its children in proportion to their triangles, and a subtree
+    /// reports its share when it is finished, so the finished share grows
+    /// roughly with the work done and ends at exactly `TOTAL`.
+    pub const TOTAL: u64 = 1 << 40;
+
+    /// The fraction of the tree built, in `[0, 1]`.
+    pub fn fraction(&self) -> f64 {
+        self.done.load(Ordering::Relaxed) as f64 / Self::TOTAL as f64
+    }
+
+    /// The stage the build is in.
+    pub fn stage(&self) -> BuildStage {
+        match self.stage.load(Ordering::Relaxed) {
+            0 => BuildStage::Waiting,
+            1 => BuildStage::Preparing,
+            2 => BuildStage::Splitting,
+            3 => BuildStage::Statistics,
+            _ => BuildStage::Finished,
+        }
+    }
+
+    fn set_stage(&self, stage: BuildStage) {
+        self.stage.store(stage as u8, Ordering::Relaxed);
+    }
+
+    pub(crate) fn add_done(&self, units: u64) {
+        self.done.fetch_add(units, Ordering::Relaxed);
     }
 }
 
@@ -207,7 +298,23 @@ impl KdTree {
     /// If `triangles` has 2³⁰ or more non-skipped entries or `PRIM_INCOMPLETE`
     /// (2³² − 3) or more in all, or the tree outgrows the node's 30-bit fields.
     pub fn build(triangles: &[[Vec3; 3]], config: &BuildConfig) -> KdTree {
+        Self::build_with_progress(triangles, config, None)
+    }
+
+    /// [`KdTree::build`], reporting its stage and the fraction of the tree
+    /// built to `progress`, which another thread may poll (a progress bar).
+    pub fn build_with_progress(
+        triangles: &[[Vec3; 3]],
+        config: &BuildConfig,
+        progress: Option<&BuildProgress>,
+    ) -> KdTree {
         let start = Instant::now();
+        let stage = |s| {
+            if let Some(p) = progress {
+                p.set_stage(s)
+            }
+        };
+        stage(BuildStage::Preparing);
         assert!(
             triangles.len() < PRIM_INCOMPLETE as usize,
             "{} triangles: primitive ids must stay below {PRIM_INCOMPLETE:#x}",
@@ -221,14 +328,17 @@ impl KdTree {
         let included_count = included.len();
         let max_depth = config.depth_limit(included_count);
 
-        let ctx = sah::Ctx::new(triangles, &boxes, config, max_depth);
+        let ctx = sah::Ctx::new(triangles, &boxes, config, max_depth, progress);
+        stage(BuildStage::Splitting);
         let (nodes, prim_indices) = sah::build(&ctx, included, bounds);
         let build_seconds = start.elapsed().as_secs_f64();
+        stage(BuildStage::Statistics);
         let mut tree = KdTree { nodes, prim_indices, bounds, stats: BuildStats::default() };
         tree.stats =
             BuildStats::compute(&tree, config, included_count, triangles.len() - included_count, build_seconds);
         tree.stats.peak_scratch_bytes = ctx.meter.peak();
         tree.stats.threads = rayon::current_num_threads();
+        stage(BuildStage::Finished);
         tree
     }
 
@@ -325,6 +435,12 @@ mod tests {
     use crate::kdtree::traverse::{trace_ray, SceneRef, Variant};
     use crate::reference::{agrees, Agreement};
     use glam::DVec3;
+
+    /// The binned builder on every node of at least 16 triangles, with few
+    /// bins: its paths (binning, exact classification, hand-over to the
+    /// sweep) on the small inputs of these tests.
+    const BINNED_SMALL: BuildConfig =
+        BuildConfig { builder: Builder::Binned { bins: 8, min_prims: 16 }, ..BuildConfig::TUNED };
 
     /// xorshift64* (Vigna 2016): a tiny deterministic generator for the tests.
     struct Rng(u64);
@@ -753,6 +869,9 @@ mod tests {
             BuildConfig { max_leaf_prims: 0, ..BuildConfig::WALD_HAVRAN },
             BuildConfig { perfect_splits: false, ..BuildConfig::WALD_HAVRAN },
             BuildConfig { empty_bonus: 0.0, traversal_cost: 0.0, ..BuildConfig::PBRT_V3 },
+            BINNED_SMALL,
+            BuildConfig { builder: Builder::Binned { bins: 2, min_prims: 1 }, ..BuildConfig::PBRT_V3 },
+            BuildConfig { perfect_splits: false, ..BINNED_SMALL },
         ];
         for seed in 0..6 {
             let tris =
@@ -779,22 +898,42 @@ mod tests {
     fn deterministic_across_thread_counts() {
         let mut tris = soup(7, 40_000, 0.02);
         tris.extend(soup(9, 2_000, 0.6));
-        let build = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-            pool.install(|| KdTree::build(&tris, &BuildConfig::default()))
-        };
-        let one = build(1);
-        assert_eq!(one.stats.threads, 1);
-        for threads in [2, 3] {
-            let many = build(threads);
-            assert_eq!(many.stats.threads, threads);
-            assert!(one.nodes == many.nodes && one.prim_indices == many.prim_indices && one.bounds == many.bounds);
-            let same_run = |s: &BuildStats| BuildStats { build_seconds: 0.0, peak_scratch_bytes: 0, threads: 0, ..*s };
-            assert_eq!(same_run(&one.stats), same_run(&many.stats));
+        // The binned builder with its parallel binning and clipping on the top nodes.
+        let binned = BuildConfig { builder: Builder::Binned { bins: 32, min_prims: 1024 }, ..BuildConfig::default() };
+        for config in [BuildConfig { builder: Builder::Sweep, ..BuildConfig::default() }, binned] {
+            let build = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| KdTree::build(&tris, &config))
+            };
+            let one = build(1);
+            assert_eq!(one.stats.threads, 1);
+            for threads in [2, 3] {
+                let many = build(threads);
+                assert_eq!(many.stats.threads, threads);
+                assert!(one.nodes == many.nodes && one.prim_indices == many.prim_indices && one.bounds == many.bounds);
+                let same_run =
+                    |s: &BuildStats| BuildStats { build_seconds: 0.0, peak_scratch_bytes: 0, threads: 0, ..*s };
+                assert_eq!(same_run(&one.stats), same_run(&many.stats));
+            }
+            let again = build(2);
+            assert!(one.nodes == again.nodes && one.prim_indices == again.prim_indices);
+            eprintln!("{:?}: {}", config.builder, one.stats);
         }
-        let again = build(2);
-        assert!(one.nodes == again.nodes && one.prim_indices == again.prim_indices);
-        eprintln!("{}", one.stats);
+    }
+
+    /// Progress ends at exactly the whole, with the same tree as without it.
+    #[test]
+    fn progress_reaches_the_whole() {
+        let tris = soup(11, 20_000, 0.05);
+        let binned = BuildConfig { builder: Builder::Binned { bins: 16, min_prims: 2048 }, ..BuildConfig::default() };
+        for config in [BuildConfig::default(), binned, BuildConfig::PBRT_V3] {
+            let progress = BuildProgress::default();
+            assert_eq!((progress.stage(), progress.fraction()), (BuildStage::Waiting, 0.0));
+            let tree = KdTree::build_with_progress(&tris, &config, Some(&progress));
+            assert_eq!(progress.stage(), BuildStage::Finished);
+            assert_eq!(progress.done.load(Ordering::Relaxed), BuildProgress::TOTAL, "{config:?}");
+            assert!(tree.nodes == KdTree::build(&tris, &config).nodes);
+        }
     }
 
     /// The structured inputs of the field's pitfalls.
@@ -883,6 +1022,7 @@ mod tests {
                 BuildConfig::WALD_HAVRAN,
                 BuildConfig::default(),
                 BuildConfig { max_depth: Some(4), ..BuildConfig::PBRT_V3 },
+                BINNED_SMALL,
             ] {
                 let tree = KdTree::build(&tris, &config);
                 check_tree(&tris, &tree, &config);
@@ -978,7 +1118,7 @@ mod tests {
         let mut hits = 0;
         for (seed, n, size) in [(1u64, 50, 0.5), (2, 400, 0.2), (3, 2000, 0.05)] {
             let tris = soup(seed, n, size);
-            for config in [BuildConfig::PBRT_V3, BuildConfig::WALD_HAVRAN, BuildConfig::default()] {
+            for config in [BuildConfig::PBRT_V3, BuildConfig::WALD_HAVRAN, BuildConfig::default(), BINNED_SMALL] {
                 hits += compare_with_reference(&format!("soup {n}"), &tris, &config, 500).0;
             }
         }
@@ -1003,6 +1143,7 @@ mod tests {
         let (hits, _) = compare_with_reference("teapot", &tris, &BuildConfig::default(), 2000);
         assert!(hits > 900, "{hits} hits");
         compare_with_reference("teapot (pbrt-v3)", &tris, &BuildConfig::PBRT_V3, 500);
+        compare_with_reference("teapot (binned)", &tris, &BINNED_SMALL, 500);
     }
 
     /// Build times and statistics on the bundled scenes:

@@ -13,10 +13,16 @@ use kdtrace::Ray;
 /// A headless context on the default device (lavapipe here) with the validation
 /// layer on when installed — required when `CI` is set, so CI cannot skip it.
 pub fn context() -> Arc<GpuContext> {
+    try_context(false).expect("creating a Vulkan device (run tools/setup)")
+}
+
+/// [`context`], with the ray-query backend's extensions enabled when `ray_query`
+/// (an error naming what the device lacks otherwise).
+pub fn try_context(ray_query: bool) -> kdtrace::Result<Arc<GpuContext>> {
     let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
     let validation = if ci { Validation::Required } else { Validation::IfAvailable };
-    let options = ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok(), validation };
-    GpuContext::headless(&options).expect("creating a Vulkan device (run tools/setup)")
+    let options = ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok(), validation, ray_query };
+    GpuContext::headless(&options)
 }
 
 /// Fails the test when the validation layer reported anything.

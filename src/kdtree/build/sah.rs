@@ -21,9 +21,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use glam::Vec3;
 
 use super::clip::clip_triangle_split;
-use super::BuildConfig;
+use super::{BuildConfig, BuildProgress, Builder};
 use crate::geom::Aabb;
 use crate::kdtree::node::{KdNode, MAX_NODE_FIELD};
+
+mod binned;
 
 // ---- Events -------------------------------------------------------------
 //
@@ -161,12 +163,35 @@ pub(super) struct Ctx<'a> {
     costs: Costs,
     max_depth: u32,
     pub(super) meter: Meter,
+    progress: Option<&'a BuildProgress>,
 }
 
 impl<'a> Ctx<'a> {
-    pub(super) fn new(triangles: &'a [[Vec3; 3]], boxes: &'a [Aabb], config: &'a BuildConfig, max_depth: u32) -> Self {
-        Ctx { triangles, boxes, config, costs: Costs::new(config), max_depth, meter: Meter::default() }
+    pub(super) fn new(
+        triangles: &'a [[Vec3; 3]],
+        boxes: &'a [Aabb],
+        config: &'a BuildConfig,
+        max_depth: u32,
+        progress: Option<&'a BuildProgress>,
+    ) -> Self {
+        Ctx { triangles, boxes, config, costs: Costs::new(config), max_depth, meter: Meter::default(), progress }
     }
+
+    /// Reports a finished subtree that held `share` of the build's work.
+    fn finished(&self, share: u64) {
+        if let Some(p) = self.progress {
+            p.add_done(share);
+        }
+    }
+}
+
+/// The share of the build's progress units ([`BuildProgress::TOTAL`]) of each
+/// child of a node that holds `share`: proportional to the child's triangles,
+/// the two adding up to `share`.
+fn split_share(share: u64, below: usize, above: usize) -> [u64; 2] {
+    let total = (below + above).max(1) as u128;
+    let b = (share as u128 * below as u128 / total) as u64;
+    [b, share - b]
 }
 
 /// A node still to be built: its triangles and their sorted events per axis.
@@ -632,7 +657,8 @@ fn build_serial(
 
 /// Builds a subtree, splitting large nodes into parallel tasks. `ctx.meter`
 /// counts `node`'s bytes on entry and no longer on return.
-fn build_parallel(ctx: &Ctx, node: NodeData, voxel: Aabb, depth: u32, bad_refines: u32) -> Part {
+/// `share` is the node's part of the build's progress units.
+fn build_parallel(ctx: &Ctx, node: NodeData, voxel: Aabb, depth: u32, bad_refines: u32, share: u64) -> Part {
     let mut scratch = Scratch::default();
     if node.prims.len() < PARALLEL_SUBTREE_PRIMS {
         let mut chunk = Chunk::default();
@@ -640,26 +666,35 @@ fn build_parallel(ctx: &Ctx, node: NodeData, voxel: Aabb, depth: u32, bad_refine
         let mut meter = LocalMeter { live: start, peak: start };
         build_serial(ctx, node, voxel, depth, bad_refines, &mut scratch, &mut meter, &mut chunk);
         ctx.meter.add_subtree(start, &meter);
+        ctx.finished(share);
         return Part::Chunk(chunk);
     }
     let Some((split, bad_refines)) =
         decide(ctx, node.prims.len(), depth, bad_refines, || find_split(ctx, &node, &voxel))
     else {
-        let mut chunk = Chunk::default();
-        ctx.meter.sub(node.bytes());
-        push_leaf(&mut chunk, node);
-        return Part::Chunk(chunk);
+        ctx.finished(share);
+        return leaf_part(ctx, node);
     };
     let parent_bytes = node.bytes();
     let [(below, below_box), (above, above_box)] = split_node(ctx, node, &voxel, &split, &mut scratch);
     ctx.meter.add(below.bytes() + above.bytes());
     ctx.meter.sub(parent_bytes);
     drop(scratch);
+    let [below_share, above_share] = split_share(share, below.prims.len(), above.prims.len());
     let (below, above) = rayon::join(
-        || build_parallel(ctx, below, below_box, depth + 1, bad_refines),
-        || build_parallel(ctx, above, above_box, depth + 1, bad_refines),
+        || build_parallel(ctx, below, below_box, depth + 1, bad_refines, below_share),
+        || build_parallel(ctx, above, above_box, depth + 1, bad_refines, above_share),
     );
     Part::Split { axis: split.axis, pos: split.pos, below: Box::new(below), above: Box::new(above) }
+}
+
+/// A leaf of `node`'s triangles; `ctx.meter` counts its bytes on entry and
+/// no longer on return.
+fn leaf_part(ctx: &Ctx, node: NodeData) -> Part {
+    let mut chunk = Chunk::default();
+    ctx.meter.sub(node.bytes());
+    push_leaf(&mut chunk, node);
+    Part::Chunk(chunk)
 }
 
 /// Appends `part` to the final arrays, turning chunk-relative indices absolute.
@@ -728,6 +763,19 @@ fn radix_sort_events(events: &mut Vec<u64>) {
 /// nodes and the primitive indices in depth-first order.
 pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, Vec<u32>) {
     assert!(prims.len() < MAX_PRIMS, "{} triangles: the builder handles fewer than 2^30", prims.len());
+    let part = match ctx.config.builder {
+        Builder::Binned { bins, min_prims } if prims.len() >= min_prims as usize => {
+            binned::build(ctx, prims, bounds, bins as usize, min_prims as usize)
+        }
+        _ => build_swept(ctx, prims, bounds),
+    };
+    let (mut nodes, mut prim_indices) = (Vec::new(), Vec::new());
+    flatten(part, &mut nodes, &mut prim_indices);
+    (nodes, prim_indices)
+}
+
+/// The whole tree by the exact sweep, from one sort of all events.
+fn build_swept(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> Part {
     // The initial sort: the only one over all events (Wald & Havran 2006, §5.1).
     let events = per_axis(prims.len() >= PARALLEL_AXIS_PRIMS, |axis| {
         let mut events = Vec::with_capacity(prims.len() * 2);
@@ -743,10 +791,7 @@ pub(super) fn build(ctx: &Ctx, prims: Vec<u32>, bounds: Aabb) -> (Vec<KdNode>, V
     });
     let root = NodeData::from_axes(prims, events);
     ctx.meter.add(root.bytes());
-    let part = build_parallel(ctx, root, bounds, 0, 0);
-    let (mut nodes, mut prim_indices) = (Vec::new(), Vec::new());
-    flatten(part, &mut nodes, &mut prim_indices);
-    (nodes, prim_indices)
+    build_parallel(ctx, root, bounds, 0, 0, BuildProgress::TOTAL)
 }
 
 #[cfg(test)]

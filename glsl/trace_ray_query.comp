@@ -1,0 +1,118 @@
+#version 460
+// The ray-query kernel: one ray per invocation through the driver's own
+// acceleration structure (VK_KHR_ray_query), reading the same rays and writing
+// the same hits as trace.comp. src/ray_query.rs builds the scene: the triangles
+// that can be hit, sorted by the Morton code of their centroids (the driver's
+// BVH quality depends on the order), with prim_ids mapping the driver's
+// primitive index back to the scene's triangle index.
+//
+// A ray query takes only 0 <= tmin <= tmax, finite origins and directions and
+// no NaN (otherwise its behaviour is undefined), so every ray is checked first:
+// invalid rays are written PRIM_INVALID as trace.comp writes them, empty
+// segments as misses, and a segment starting behind its origin (tmin < 0) is
+// traced from where it enters the scene box instead.
+
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_ray_query : require
+
+#include "ray.glsl"
+#include "ray_checks.glsl"
+
+layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
+
+// Specialization constants (src/ray_query.rs sets them).
+layout(constant_id = 0) const bool ANY_HIT = false;  // stop at the first hit (shadow rays)
+
+layout(set = 0, binding = RQ_BINDING_SCENE) uniform accelerationStructureEXT scene;
+layout(std430, set = 0, binding = RQ_BINDING_PRIM_IDS) readonly buffer PrimIds { uint prim_ids[]; };
+layout(std430, set = 0, binding = RQ_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = RQ_BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
+
+layout(push_constant) uniform Push { TraceParams params; };
+
+#define INF uintBitsToFloat(0x7f800000u)
+#define NAN uintBitsToFloat(0x7fc00000u)
+
+// The part [t0, t1] of the line o + t d inside the scene box, in f64 (false: it
+// misses the box).
+bool line_in_box(vec3 o, vec3 d, out double t0, out double t1) {
+    t0 = double(-INF);
+    t1 = double(INF);
+    for (uint axis = 0u; axis < 3u; ++axis) {
+        double lo = double(params.scene_min[axis]);
+        double hi = double(params.scene_max[axis]);
+        if (d[axis] == 0.0) {
+            if (double(o[axis]) < lo || double(o[axis]) > hi) return false;
+            continue;
+        }
+        double a = (lo - double(o[axis])) / double(d[axis]);
+        double b = (hi - double(o[axis])) / double(d[axis]);
+        t0 = max(t0, min(a, b));
+        t1 = min(t1, max(a, b));
+    }
+    return t0 <= t1;
+}
+
+// The closest (or, ANY_HIT, the first found) hit of a valid ray with a finite
+// direction, t in the ray's own parameter.
+Hit trace_query(Ray ray) {
+    Hit miss = Hit(INF, PRIM_MISS, 0.0, 0.0);
+    vec3 origin = ray.origin;
+    float tmin = ray.tmin;
+    float tmax = ray.tmax;
+    if (!(tmin <= tmax) || tmin == INF) return miss;
+    // Where the segment starts behind the origin, trace from a point just before
+    // the line enters the scene box (or from tmin, whichever is later): the
+    // query wants tmin >= 0, and the box entry keeps far starts (tmin = -1e30)
+    // near the scene. t goes back to the ray's parameter below.
+    float shift = 0.0;
+    if (tmin < 0.0) {
+        double t0, t1;
+        if (!line_in_box(ray.origin, ray.dir, t0, t1)) return miss;
+        if (t0 >= 0.0) {
+            tmin = 0.0;  // no part of the box lies behind the origin
+        } else {
+            double start = max(double(tmin), t0 - (t1 - t0) * (1.0LF / 65536.0LF));
+            shift = float(start);
+            origin = vec3(dvec3(ray.origin) + double(shift) * dvec3(ray.dir));
+            tmin = max(float(double(tmin) - double(shift)), 0.0);
+            tmax = float(double(tmax) - double(shift));
+        }
+        if (!(tmin <= tmax)) return miss;
+    }
+    tmin = max(tmin, 0.0);  // -0.0 as +0.0
+
+    uint flags = gl_RayFlagsOpaqueEXT | (ANY_HIT ? gl_RayFlagsTerminateOnFirstHitEXT : 0u);
+    rayQueryEXT query;
+    rayQueryInitializeEXT(query, scene, flags, 0xFFu, origin, tmin, ray.dir, tmax);
+    // Every triangle is opaque, so the driver commits them itself; a candidate
+    // would only come from non-opaque geometry, which this scene has none of.
+    while (rayQueryProceedEXT(query)) {
+        if (rayQueryGetIntersectionTypeEXT(query, false) == gl_RayQueryCandidateIntersectionTriangleEXT) {
+            rayQueryConfirmIntersectionEXT(query);
+        }
+    }
+    if (rayQueryGetIntersectionTypeEXT(query, true) != gl_RayQueryCommittedIntersectionTriangleEXT) return miss;
+    float t = rayQueryGetIntersectionTEXT(query, true);
+    vec2 uv = rayQueryGetIntersectionBarycentricsEXT(query, true);  // the weights of v1 and v2
+    uint prim = prim_ids[rayQueryGetIntersectionPrimitiveIndexEXT(query, true)];
+    if (shift != 0.0) t = float(double(t) + double(shift));
+    return Hit(t, prim, uv.x, uv.y);
+}
+
+void main() {
+    uint index = gl_GlobalInvocationID.x;
+    if (index >= params.ray_count) return;
+    Ray ray = rays[index];
+    ray.dir = traced_dir(ray.dir);
+    Hit hit;
+    if (!ray_is_valid(ray)) {
+        hit = Hit(NAN, PRIM_INVALID, 0.0, 0.0);
+    } else if (any(isinf(ray.dir))) {
+        // A query takes finite directions only: such a ray cannot be traced here.
+        hit = Hit(NAN, PRIM_INCOMPLETE, 0.0, 0.0);
+    } else {
+        hit = trace_query(ray);
+    }
+    hits[index] = hit;
+}
