@@ -132,6 +132,7 @@
 //! [gpu-allocator]: https://crates.io/crates/gpu-allocator
 #![warn(missing_docs)]
 
+#[cfg(feature = "cli")]
 pub mod bench;
 /// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).
 pub mod consts;
@@ -147,6 +148,7 @@ pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod stress;
+#[cfg(feature = "cli")]
 pub mod sweep;
 pub mod trace;
 
