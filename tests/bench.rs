@@ -248,6 +248,8 @@ fn hard_rays_show_what_robustness_buys() {
         dir.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Without a CPU or Embree baseline the ratio columns say so instead of NaN.
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("NaN"), "{}", String::from_utf8_lossy(&o.stdout));
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();

@@ -41,7 +41,7 @@ pub fn markdown_table(cells: &[Cell]) -> String {
         let is_base = base.get(&(c.scene.clone(), c.kind)) == Some(&i);
         let _ = writeln!(
             out,
-            "| {} | {} {} | {}{} | {:.1} | {:.1} | {:.1} | {:.2} ({:.2}–{:.2}) | {:.2} | {:.2} | {:.2} | {} | {}/{} ({:.2}%) | {} | {} | {} |",
+            "| {} | {} {} | {}{} | {:.1} | {:.1} | {:.1} | {:.2} ({:.2}–{:.2}) | {:.2} | {:.2} | {} | {} | {}/{} ({:.2}%) | {} | {} | {} |",
             c.scene,
             c.rays,
             c.kind,
@@ -55,7 +55,7 @@ pub fn markdown_table(cells: &[Cell]) -> String {
             ms(c.trace_seconds[2]),
             ms(c.wall_seconds),
             c.rays_per_second() / 1e6,
-            c.speedup,
+            ratio(c.speedup),
             counters,
             c.disagreeing(),
             c.tally.rays,
@@ -113,10 +113,19 @@ pub fn summary_table(cells: &[Cell]) -> String {
             rate(cpu),
             rate(embree),
             rate(ray_query),
-            stack.map_or("—".into(), |c| format!("{:.2}", c.speedup)),
+            stack.map_or("—".into(), |c| ratio(c.speedup)),
         );
     }
     out
+}
+
+/// A speed ratio to two decimals, or "—" when there is no baseline to divide by.
+fn ratio(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.2}")
+    } else {
+        "—".into()
+    }
 }
 
 fn snake(name: &str) -> String {
