@@ -482,38 +482,9 @@ mod tests {
             .collect()
     }
 
-    /// A minimal OBJ reader (`v` and `f`, fanned n-gons, negative indices), so
-    /// these tests need not wait for the scene loader.
+    /// The triangles of an OBJ file, through the scene loader.
     fn read_obj(path: &str) -> Vec<[Vec3; 3]> {
-        let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        let mut verts = Vec::new();
-        let mut tris = Vec::new();
-        for line in text.lines() {
-            let mut words = line.split_whitespace();
-            match words.next() {
-                Some("v") => {
-                    let c: Vec<f32> = words.take(3).map(|w| w.parse().unwrap()).collect();
-                    verts.push(Vec3::new(c[0], c[1], c[2]));
-                }
-                Some("f") => {
-                    let idx: Vec<usize> = words
-                        .map(|w| {
-                            let i: i64 = w.split('/').next().unwrap().parse().unwrap();
-                            if i < 0 {
-                                (verts.len() as i64 + i) as usize
-                            } else {
-                                i as usize - 1
-                            }
-                        })
-                        .collect();
-                    for k in 1..idx.len() - 1 {
-                        tris.push([verts[idx[0]], verts[idx[k]], verts[idx[k + 1]]]);
-                    }
-                }
-                _ => {}
-            }
-        }
-        tris
+        crate::scene::Scene::load(std::path::Path::new(path)).unwrap_or_else(|e| panic!("{path}: {e}")).triangles
     }
 
     fn teapot() -> Vec<[Vec3; 3]> {
