@@ -425,10 +425,7 @@ impl BuilderArgs {
                 return Ok(BuildConfig { builder: Builder::Sweep, ..config });
             }
             (_, Builder::Binned { bins, min_prims }) => (bins, min_prims),
-            (Some(BuilderKind::Binned), Builder::Sweep) => match Builder::BINNED {
-                Builder::Binned { bins, min_prims } => (bins, min_prims),
-                Builder::Sweep => unreachable!("Builder::BINNED is binned"),
-            },
+            (Some(BuilderKind::Binned), Builder::Sweep) => (Builder::DEFAULT_BINS, Builder::DEFAULT_BINNED_ABOVE),
         };
         let bins = self.bins.unwrap_or(binned.0);
         if bins < 2 {

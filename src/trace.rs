@@ -1032,18 +1032,7 @@ impl Tracer {
                         ts.record(cmd, 1);
                     }
                     // Make the shader writes visible to the host reads below.
-                    let barrier = vk::MemoryBarrier::default()
-                        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                        .dst_access_mask(vk::AccessFlags::HOST_READ);
-                    ctx.device.cmd_pipeline_barrier(
-                        cmd,
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::PipelineStageFlags::HOST,
-                        vk::DependencyFlags::empty(),
-                        &[barrier],
-                        &[],
-                        &[],
-                    );
+                    ctx.record_host_read_barrier(cmd);
                 }
             })?;
             if let (Some(ts), Some(total)) = (&timestamps, result.gpu_seconds.as_mut()) {

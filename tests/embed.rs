@@ -240,21 +240,8 @@ fn submit<T>(ctx: &GpuContext, record: impl FnOnce(vk::CommandBuffer) -> T) -> T
     let mut out = None;
     ctx.submit_and_wait(|cmd| {
         out = Some(record(cmd));
-        let barrier = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ);
         // SAFETY: `cmd` is recording.
-        unsafe {
-            ctx.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[barrier],
-                &[],
-                &[],
-            )
-        };
+        unsafe { ctx.record_host_read_barrier(cmd) };
     })
     .unwrap();
     out.unwrap()

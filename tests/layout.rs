@@ -70,18 +70,7 @@ fn gpu_reads_every_field_where_rust_wrote_it() {
         // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
         unsafe {
             kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), 1);
-            let barrier = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ);
-            ctx.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[barrier],
-                &[],
-                &[],
-            );
+            ctx.record_host_read_barrier(cmd);
         }
     })
     .unwrap();

@@ -321,21 +321,8 @@ fn record_trace_follows_the_embedders_contract() {
     ctx.submit_and_wait(|cmd| {
         // SAFETY: `cmd` is recording; the buffer and the binding outlive the waited submission.
         binding = Some(unsafe { tracer.record_trace(cmd, ray_range, hit_range, count as u32, &options) }.unwrap());
-        let barrier = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ);
         // SAFETY: as above.
-        unsafe {
-            ctx.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[barrier],
-                &[],
-                &[],
-            )
-        };
+        unsafe { ctx.record_host_read_barrier(cmd) };
     })
     .unwrap();
     let hits: &[Hit] = bytemuck::cast_slice(buffer.read(hits_at as usize, count as usize * 16).unwrap());

@@ -656,6 +656,27 @@ impl GpuContext {
         }
     }
 
+    /// Records a barrier that makes compute-shader and transfer writes before it
+    /// visible to host reads after the submission completes (readbacks).
+    ///
+    /// # Safety
+    /// `cmd` must be a command buffer of this device in the recording state.
+    pub unsafe fn record_host_read_barrier(&self, cmd: vk::CommandBuffer) {
+        let barrier = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ);
+        // SAFETY: the caller's contract: `cmd` is recording on this device.
+        self.device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        );
+    }
+
     /// Records commands with `record` into a one-time command buffer, submits it
     /// on the context's queue and waits for it.
     pub fn submit_and_wait(&self, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {

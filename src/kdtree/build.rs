@@ -107,7 +107,12 @@ pub enum Builder {
 
 impl Builder {
     /// The binned builder with the measured defaults (docs/BUILDER.md).
-    pub const BINNED: Builder = Builder::Binned { bins: 64, min_prims: 4096 };
+    pub const BINNED: Builder =
+        Builder::Binned { bins: Builder::DEFAULT_BINS, min_prims: Builder::DEFAULT_BINNED_ABOVE };
+    /// Bins per axis of [`Builder::BINNED`].
+    pub const DEFAULT_BINS: u32 = 64;
+    /// Nodes of at least this many triangles are binned by [`Builder::BINNED`].
+    pub const DEFAULT_BINNED_ABOVE: u32 = 4096;
 }
 
 impl BuildConfig {

@@ -1053,7 +1053,7 @@ pub fn render_progressive(
                     ctx.submit_and_wait(|cmd| {
                         let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: pixel_count * 16 }];
                         device.cmd_copy_buffer(cmd, accum.buffer, readback.buffer, &region);
-                        host_barrier(&ctx, cmd);
+                        ctx.record_host_read_barrier(cmd);
                     })?;
                 }
                 let sums: &[[f32; 4]] = bytemuck::cast_slice(readback.read(0, (pixel_count * 16) as usize)?);
@@ -1068,7 +1068,7 @@ pub fn render_progressive(
         ctx.submit_and_wait(|cmd| {
             let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: pixel_count * 16 }];
             device.cmd_copy_buffer(cmd, accum.buffer, readback.buffer, &region);
-            host_barrier(&ctx, cmd);
+            ctx.record_host_read_barrier(cmd);
         })?;
     }
     stats.render_seconds = loop_start.elapsed().as_secs_f64();
@@ -1161,7 +1161,7 @@ impl<'a> Pass<'a> {
                 t.record(cmd, index);
             }
         }
-        host_barrier(self.ctx, cmd);
+        self.ctx.record_host_read_barrier(cmd);
     }
 
     /// After the submission completed: adds its GPU times.
@@ -1192,22 +1192,6 @@ unsafe fn compute_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
         cmd,
         vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
         vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-        vk::DependencyFlags::empty(),
-        &[barrier],
-        &[],
-        &[],
-    );
-}
-
-/// Compute and transfer writes before host reads.
-unsafe fn host_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
-    let barrier = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(vk::AccessFlags::HOST_READ);
-    ctx.device.cmd_pipeline_barrier(
-        cmd,
-        vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-        vk::PipelineStageFlags::HOST,
         vk::DependencyFlags::empty(),
         &[barrier],
         &[],

@@ -145,23 +145,12 @@ fn find_split(ctx: &Ctx, node: &RefNode, voxel: &Aabb, bins: usize) -> Option<Sp
             let p_below = cap + d * rim;
             let p_above = cap + (hi as f64 - pos as f64) * rim;
             let cost = ctx.costs.split(p_below, p_above, below, above);
-            if best.is_none_or_costlier(cost) {
+            if best.map_or(true, |b| cost < b.cost) {
                 best = Some(Split { axis, key: super::ordered(pos), pos, cost, planar_below: true, below, above });
             }
         }
     }
     best
-}
-
-/// `Option::is_none_or` for the MSRV.
-trait NoneOrCostlier {
-    fn is_none_or_costlier(&self, cost: f64) -> bool;
-}
-
-impl NoneOrCostlier for Option<Split> {
-    fn is_none_or_costlier(&self, cost: f64) -> bool {
-        self.map_or(true, |b| cost < b.cost)
-    }
 }
 
 /// Splits a binned node at `s`: a triangle whose (clipped) box ends at or
