@@ -350,7 +350,9 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
     // Any-hit mode ends the loop by its condition, not by a `break`: on lavapipe a
     // divergent break here made robust any-hit traversal 1.6x slower than closest
     // hit for the same work (measured on Cornell box shadow rays).
-    for (; i < count && !(ANY_HIT && stopped); ++i) {
+    // A guarded do-while, not a for: lavapipe runs a loop's body once more under an
+    // empty mask to find that every lane has left it, unless the test is at its end.
+    if (count > 0u) do {
         vec3 v0, v1, v2;
         uint prim = load_triangle(offset + i, v0, v1, v2);
         float t, u, v, e;
@@ -371,7 +373,8 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Hit best, inout TraceCounters c) 
             first_unsure = min(first_unsure, i);
             unsure += 1u;
         }
-    }
+        ++i;
+    } while (i < count && !(ANY_HIT && stopped));
     // A stop at triangle k leaves i = k + 1: the triangles tested.
     c.triangles += stopped ? i : count;
     bool complete = stopped || i == count;
@@ -436,6 +439,15 @@ uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Hit best, inout TraceCounte
     if (!intersect_leaf(r, n, best, c)) return LEAF_CUT;
     bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
     return done ? LEAF_DONE : LEAF_GO_ON;
+}
+
+// True while a descent goes on at node `n` (segment end t1): an interior node, or
+// an empty leaf after which traversal goes on (visit_leaf would answer LEAF_GO_ON:
+// no triangle to test, so the descent may pop the next entry itself).
+bool descends(uvec2 n, float t1, Hit best) {
+    if (!node_is_leaf(n)) return true;
+    bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
+    return node_prim_count(n) == 0u && !done;
 }
 
 // Distance at which the ray leaves a node box (side buffer node_boxes): the

@@ -23,27 +23,39 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;
-        while (!node_is_leaf(n)) {
-            uint near, far;
-            float ts;
-            uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
-            if (visit == VISIT_NEAR) {
-                node = near;
-            } else if (visit == VISIT_FAR) {
-                node = far;
+        // Descend to a leaf with triangles. An empty leaf that does not end the
+        // traversal is left here, popping the next entry: the lane keeps descending
+        // instead of waiting for the others' triangle tests.
+        if (descends(n, t1, best)) do {
+            if (node_is_leaf(n)) {
+                c.leaves += 1u;
+                if (sp == 0u) return true;
+                --sp;
+                node = stack_node[sp];
+                t0 = stack_t0[sp];
+                t1 = stack_t1[sp];
             } else {
-                // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
-                stack_node[sp] = far;
-                stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
-                stack_t1[sp] = t1;
-                ++sp;
-                node = near;
-                if (visit == VISIT_BOTH) t1 = ts;
+                uint near, far;
+                float ts;
+                uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
+                if (visit == VISIT_NEAR) {
+                    node = near;
+                } else if (visit == VISIT_FAR) {
+                    node = far;
+                } else {
+                    // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
+                    stack_node[sp] = far;
+                    stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
+                    stack_t1[sp] = t1;
+                    ++sp;
+                    node = near;
+                    if (visit == VISIT_BOTH) t1 = ts;
+                }
             }
             if (step >= MAX_TRAVERSAL_STEPS) return false;
             n = fetch_node(node, c);
             ++step;
-        }
+        } while (descends(n, t1, best));
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE) {
