@@ -33,11 +33,27 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;
-        while (!node_is_leaf(n)) {
+        // An empty leaf that does not end the traversal, with an entry to pop, is
+        // left inside the descent (as in stack.glsl); restarts go through the
+        // leaf visit below.
+        if (descends(n, t1, best) && (!node_is_leaf(n) || (count > 0u && !k.seeking))) do {
             uint near, far;
             float ts;
-            uint visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
-            if (ROBUST && k.seeking) {
+            uint visit = VISIT_NEAR;
+            if (node_is_leaf(n)) {
+                c.leaves += 1u;
+                head = (head + STACK_SIZE - 1u) % STACK_SIZE;
+                count -= 1u;
+                node = stack_node[head];
+                t0 = stack_t0[head];
+                t1 = stack_t1[head];
+                t1_plane = stack_plane[head];
+            } else {
+                visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
+            }
+            if (node_is_leaf(n)) {
+                // popped above
+            } else if (ROBUST && k.seeking) {
                 node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best_reach(best));
                 if (!k.seeking) {
                     if (!k.found) return true;  // nothing left
@@ -81,7 +97,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             if (step >= MAX_TRAVERSAL_STEPS) return false;
             n = fetch_node(node, c);
             ++step;
-        }
+        } while (descends(n, t1, best) && (!node_is_leaf(n) || (count > 0u && !k.seeking)));
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE) {
