@@ -26,7 +26,7 @@ use std::time::Instant;
 use glam::Vec3;
 use kdtrace::kdtree::stats::BuildStats;
 use kdtrace::kdtree::traverse::{trace_ray, Counters, SceneRef, Variant};
-use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::kdtree::{BuildConfig, Builder, KdTree};
 use kdtrace::reference::{agrees, Agreement};
 use kdtrace::render::camera_rays;
 use kdtrace::scene::{Camera, Scene};
@@ -40,6 +40,12 @@ fn configs() -> Vec<(&'static str, BuildConfig)> {
     let pbrt = BuildConfig::PBRT_V3;
     vec![
         ("default", BuildConfig::default()),
+        // The default costs with the exact sweep at every node (no binned top).
+        ("sweep", BuildConfig { builder: Builder::Sweep, ..BuildConfig::TUNED }),
+        // The default with a costlier traversal step: fewer nodes, faster builds.
+        ("default-kt40", BuildConfig { traversal_cost: 40.0, ..BuildConfig::TUNED }),
+        ("default-kt50", BuildConfig { traversal_cost: 50.0, ..BuildConfig::TUNED }),
+        ("default-kt60", BuildConfig { traversal_cost: 60.0, ..BuildConfig::TUNED }),
         ("pbrt-v3", pbrt),
         ("wald-havran", wh),
         // In between: pbrt's termination and bonus with cheaper intersections.
