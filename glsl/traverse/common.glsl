@@ -92,7 +92,9 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
     precise float tmax_seg = r.tmax - r.wr.t_shift;
     t0 = SEGMENT_FRAME ? tmin_seg : r.tmin;
     t1 = SEGMENT_FRAME ? tmax_seg : r.tmax;
-    for (uint axis = 0u; axis < 3u; ++axis) {
+    // Unrolled: lavapipe runs a loop's exit pass, and indexes vectors by a variable
+    // with selects.
+    [[unroll]] for (uint axis = 0u; axis < 3u; ++axis) {
         float o = r.wr.seg_origin[axis];
         if (r.dir[axis] == 0.0) {
             if (o < bmin[axis] || o > bmax[axis]) return false;

@@ -63,7 +63,9 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
             // A closer hit can only lie in an entry that starts before this one: the
             // other side of a split plane the ray lies in (VISIT_BOTH_SAME) has the
             // same segment as the leaf just done. Drop the entries behind the hit.
-            while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best))) --sp;
+            if (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best))) do {
+                --sp;
+            } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
         }
         if (sp == 0u) return true;
         --sp;
