@@ -1,14 +1,16 @@
 //! The options several subcommands share (traversal, builder, tree cache) and
 //! the parsers of option values.
 
+use std::path::PathBuf;
+
 use anyhow::{bail, Result};
 use glam::Vec3;
 
 use kdtrace::kdtree::traverse::Traversal;
 use kdtrace::kdtree::BuildConfig;
 use kdtrace::trace::Backend;
-use std::path::PathBuf;
 
+// The traversal and the backend, shared by `render`, `trace` and `verify`.
 #[derive(clap::Args, Clone)]
 pub struct TraversalArgs {
     /// Traversal: stack | restart | push-down | short-stack | push-down-short-stack | backtrack | ropes.
@@ -34,6 +36,7 @@ pub struct TraversalArgs {
 }
 
 impl TraversalArgs {
+    /// The traversal these options name (closest hit, or any hit when `any_hit`), validated.
     pub fn parse(&self, any_hit: bool) -> Result<Traversal> {
         let traversal = Traversal {
             variant: self.traversal.parse()?,
@@ -111,6 +114,7 @@ impl BuilderArgs {
     }
 }
 
+/// `x,y,z`: three finite numbers.
 pub fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
     let parts: Vec<f32> = s
         .split(',')
@@ -122,6 +126,7 @@ pub fn parse_vec3(s: &str) -> std::result::Result<Vec3, String> {
     }
 }
 
+/// `x,y,z[,intensity]`: a position and an optional intensity (finite, >= 0).
 pub fn parse_light(s: &str) -> std::result::Result<(Vec3, Option<f32>), String> {
     let parts: Vec<&str> = s.split(',').collect();
     if parts.len() != 3 && parts.len() != 4 {

@@ -130,6 +130,7 @@ fn today() -> String {
     format!("{year:04}-{month:02}-{day:02}")
 }
 
+/// `kdtrace bench`: runs the matrix over every scene and writes the report, CSV and charts.
 pub fn bench(args: BenchArgs) -> Result<()> {
     use kdtrace::bench::matrix::{expand_traversals, parse_list};
     use kdtrace::bench::{report, MatrixOptions, RayKind};

@@ -15,6 +15,7 @@ use kdtrace::trace::Backend;
 
 use super::args::TreeArgs;
 
+/// A spinner showing `message`, ticking on its own.
 pub fn spinner(message: String) -> ProgressBar {
     let bar = ProgressBar::new_spinner().with_message(message);
     bar.enable_steady_tick(Duration::from_millis(120));
@@ -142,6 +143,7 @@ pub fn build_tree(bar: &ProgressBar, triangles: &[[Vec3; 3]], args: &TreeArgs) -
     Ok(tree)
 }
 
+/// The headless device of `ContextOptions::from_env()`.
 pub fn context() -> Result<std::sync::Arc<GpuContext>> {
     GpuContext::headless(&ContextOptions::from_env()).context("creating the Vulkan device")
 }
@@ -152,6 +154,7 @@ pub fn backend_context(backends: &[Backend]) -> Result<std::sync::Arc<GpuContext
     GpuContext::headless(&options).context("creating the Vulkan device")
 }
 
+/// A bar counting traced rays out of `len`.
 pub fn trace_bar(len: usize) -> ProgressBar {
     let bar = ProgressBar::new(len as u64);
     bar.set_style(ProgressStyle::with_template("tracing {bar:40} {pos}/{len} rays {elapsed}").unwrap());

@@ -4,6 +4,7 @@ use anyhow::{bail, Result};
 
 use kdtrace::gpu::list_devices;
 
+/// `kdtrace info`: one line per Vulkan device and its subgroup properties.
 pub fn info() -> Result<()> {
     let devices = list_devices()?;
     if devices.is_empty() {

@@ -39,6 +39,7 @@ enum RayKind {
     Random,
 }
 
+/// `kdtrace rays`: writes camera or random rays for the scene.
 pub fn rays(args: RaysArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let Some(kind) = choice::<RayKind>(&args.kind) else {

@@ -119,6 +119,7 @@ impl Heatmap {
     }
 }
 
+/// `kdtrace render`: the image (or `--heatmap`) of the scene, written as PNG or EXR.
 pub fn render(args: RenderArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
         bail!("--width and --height must be in 1..=16384");

@@ -84,6 +84,7 @@ struct Report<'a> {
     times: &'a [f64],
 }
 
+/// `kdtrace stats`: builds the tree `--repeat` times and prints the statistics of the last.
 pub fn stats(args: StatsArgs) -> Result<()> {
     let config = build_config(&args)?;
     if args.repeat == 0 {

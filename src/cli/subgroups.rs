@@ -34,6 +34,7 @@ pub struct SubgroupsArgs {
     pub png: PathBuf,
 }
 
+/// `kdtrace subgroups`: the sweep over packet variants, widths and subgroup sizes.
 pub fn subgroups(args: SubgroupsArgs) -> Result<()> {
     let (scene, tree) = load_and_build(&args.scene, &args.tree, &mut Stages::new(false))?;
     let ctx = context()?;

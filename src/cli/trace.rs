@@ -43,6 +43,8 @@ pub struct TraceArgs {
     pub timings: bool,
 }
 
+/// `kdtrace trace`: traces the ray file and writes the hits (file order), with
+/// the device and its pipelines coming up while the scene loads.
 pub fn trace(args: TraceArgs) -> Result<()> {
     let traversal = args.traversal.parse(args.any_hit)?;
     let backend = args.traversal.backend;

@@ -46,6 +46,8 @@ pub struct VerifyArgs {
     pub show_all: bool,
 }
 
+/// `kdtrace verify`: traces the stress categories (or a ray file) and judges
+/// every answer against the exact reference.
 pub fn verify(args: VerifyArgs) -> Result<()> {
     use kdtrace::stress::{judge_batch, stress_rays, table_header, table_row, Category};
     let traversal = args.traversal.parse(args.any_hit)?;
