@@ -24,10 +24,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
+use kdtrace::exact::tolerant::{agrees, Agreement};
 use kdtrace::kdtree::stats::BuildStats;
 use kdtrace::kdtree::traverse::{trace_ray, Counters, SceneRef, Variant};
 use kdtrace::kdtree::{BuildConfig, Builder, KdTree};
-use kdtrace::reference::{agrees, Agreement};
+use kdtrace::raygen::SplitMix64;
 use kdtrace::render::camera_rays;
 use kdtrace::scene::{Camera, Scene};
 use kdtrace::Ray;
@@ -182,21 +183,9 @@ fn cpu_seconds() -> f64 {
     (fields.get(11).unwrap_or(&f64::NAN) + fields.get(12).unwrap_or(&f64::NAN)) / 100.0
 }
 
-/// xorshift64*: deterministic random rays.
-struct Rng(u64);
-
-impl Rng {
-    fn next_f32(&mut self) -> f32 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 /// Rays from random points of the scene box (grown by 10 %) in random directions.
 fn random_rays(tree: &KdTree, count: usize) -> Vec<Ray> {
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut rng = SplitMix64(0x9E37_79B9_7F4A_7C15);
     let b = tree.bounds;
     let pad = b.extent() * 0.1;
     let (lo, size) = (b.min - pad, b.extent() + 2.0 * pad);

@@ -20,6 +20,11 @@
 //! Zero-area and non-finite triangles are never hit, as in the builder
 //! ([`crate::kdtree::build::is_skipped`]). Brute force over all triangles: for
 //! tests and `kdtrace verify`, not for speed.
+//!
+//! [`tolerant`] is the float64 comparison with tolerances that the random-ray
+//! tests of the builder and the GPU tracer use; it also checks barycentrics.
+
+pub mod tolerant;
 
 use std::cmp::Ordering;
 
@@ -502,7 +507,9 @@ pub fn judge_any(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit, exact: &Exact) -
 mod tests {
     use super::*;
 
-    fn quad() -> Vec<[Vec3; 3]> {
+    /// Two triangles sharing the diagonal (0,0,0)-(1,1,0) of the unit square in
+    /// z = 0, and one more at z = 1 covering the same square.
+    pub(super) fn quad() -> Vec<[Vec3; 3]> {
         vec![
             [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)],
             [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)],
@@ -559,11 +566,8 @@ mod tests {
 
     #[test]
     fn filter_and_exact_agree_on_random_pairs() {
-        let mut state = 12345u64;
-        let mut rnd = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        };
+        let mut rng = crate::raygen::SplitMix64(12345);
+        let mut rnd = || rng.range(-1.0, 1.0);
         for _ in 0..2000 {
             let tri = [Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd()), Vec3::new(rnd(), rnd(), rnd())];
             let ray =

@@ -144,7 +144,6 @@ pub mod io;
 pub mod kdtree;
 pub mod ray_query;
 pub mod raygen;
-pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod stress;

@@ -4,7 +4,9 @@ use glam::Vec3;
 
 use crate::geom::{Aabb, Ray};
 
-/// A small seeded generator (SplitMix64): reproducible batches without a crate.
+/// A small seeded generator (SplitMix64, Steele, Lea & Flood 2014): reproducible
+/// batches without a crate. The one generator of the library, its tests and
+/// benchmarks.
 #[derive(Clone, Debug)]
 pub struct SplitMix64(pub u64);
 
@@ -21,6 +23,16 @@ impl SplitMix64 {
     /// Uniform in [0, 1).
     pub fn next_f32(&mut self) -> f32 {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next_f32()
+    }
+
+    /// Uniform in `0..n` (`n > 0`; the modulo bias is negligible for small `n`).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
     }
 
     /// A uniformly distributed unit vector.

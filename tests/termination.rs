@@ -34,11 +34,11 @@ fn plane_rays(tree: &KdTree, rng: &mut Rng, count: usize) -> Vec<Ray> {
         let mut o = Vec3::new(rng.range(b.min.x, b.max.x), rng.range(b.min.y, b.max.y), rng.range(b.min.z, b.max.z));
         o[n.axis()] = n.split();
         let mut d = match i % 4 {
-            0 => axes[(rng.next_u64() % 3) as usize] * if rng.f32() < 0.5 { 1.0 } else { -1.0 },
+            0 => axes[(rng.next_u64() % 3) as usize] * if rng.next_f32() < 0.5 { 1.0 } else { -1.0 },
             1 => {
                 // Inside the split plane.
                 let mut d = rng.unit_vector();
-                d[n.axis()] = if rng.f32() < 0.5 { 0.0 } else { -0.0 };
+                d[n.axis()] = if rng.next_f32() < 0.5 { 0.0 } else { -0.0 };
                 d
             }
             2 => {

@@ -11,41 +11,27 @@ use std::process::Command;
 use glam::Vec3;
 use kdtrace::kdtree::cache::{load_or_build, CacheError, CacheKey, CacheOutcome, Stage};
 use kdtrace::kdtree::{BuildConfig, KdTree};
+use kdtrace::raygen::SplitMix64;
 use kdtrace::scene::Scene;
 use proptest::prelude::*;
 
 use common::scene_path;
 
-/// xorshift64* (Vigna 2016): a tiny deterministic generator.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    fn float(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    fn point(&mut self) -> Vec3 {
-        Vec3::new(self.float(-10.0, 10.0), self.float(-10.0, 10.0), self.float(-10.0, 10.0))
-    }
+/// A point of the cube `[-10, 10)³`.
+fn point(rng: &mut SplitMix64) -> Vec3 {
+    Vec3::new(rng.range(-10.0, 10.0), rng.range(-10.0, 10.0), rng.range(-10.0, 10.0))
 }
 
 /// `n` random small triangles in a 20-unit cube (a few degenerate ones included).
 fn soup(n: usize, seed: u64) -> Vec<[Vec3; 3]> {
-    let mut rng = Rng(seed | 1);
+    let mut rng = SplitMix64(seed);
     (0..n)
         .map(|i| {
-            let a = rng.point();
+            let a = point(&mut rng);
             if i % 50 == 7 {
                 return [a, a, a];
             }
-            [a, a + rng.point() * 0.1, a + rng.point() * 0.1]
+            [a, a + point(&mut rng) * 0.1, a + point(&mut rng) * 0.1]
         })
         .collect()
 }

@@ -97,6 +97,10 @@ impl TriangleAccel {
     /// Errors: `Error::DeviceLimit` when the device lacks the ray-query backend
     /// (naming what it lacks) or the triangles exceed `maxPrimitiveCount`;
     /// `Error::InvalidInput` without triangles.
+    ///
+    /// One function of about 160 lines: the Vulkan build sequence (sizes,
+    /// scratch, bottom level, compaction query and copy, top level) reads in
+    /// the order the specification describes it, each step using the last's handles.
     pub fn build(ctx: &Arc<GpuContext>, vertices: &[[f32; 3]]) -> Result<TriangleAccel> {
         let rq = ctx.ray_query()?;
         let triangles = vertices.len() / 3;

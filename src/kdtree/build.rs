@@ -9,7 +9,7 @@
 //! the tree does not depend on the thread count. See `build/sah.rs` for the
 //! algorithm and docs/BUILDER.md for how the defaults were chosen.
 //!
-//! The result is the 8-byte node array of [`KdNode`] in depth-first order: the
+//! The result is the 8-byte node array of [`KdNode`](super::node::KdNode) in depth-first order: the
 //! below child of an interior node is the next node, the above child is stored
 //! in the node. Leaves own contiguous ranges of `prim_indices`.
 
@@ -21,167 +21,11 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::node::KdNode;
+pub use super::config::{BuildConfig, Builder};
 use super::stats::BuildStats;
-use crate::consts::{MAX_TREE_DEPTH, PRIM_INCOMPLETE};
+pub use super::tree::{is_non_finite, is_skipped, is_zero_area, KdTree};
+use crate::consts::PRIM_INCOMPLETE;
 use crate::geom::Aabb;
-
-/// Parameters of the SAH builder.
-///
-/// The SAH cost of splitting a node `V` into `B` (below) and `A` (above) is
-/// `K_T + K_I · (1 − b) · (A(B)/A(V) · n_B + A(A)/A(V) · n_A)`, where `A(·)` is a
-/// surface area, `n` a triangle count and `b` the empty bonus when one side has
-/// no triangle (pbrt-v3's form; Wald & Havran scale `K_T` by `λ = 1 − b` too);
-/// the cost of a leaf is `K_I · n`. Only the ratio `K_T / K_I`, `b` and the
-/// termination rules shape the tree.
-///
-/// Published defaults: pbrt-v3 uses `K_I = 80, K_T = 1, b = 0.5`, stops
-/// splitting at one triangle and tolerates a few splits costlier than a leaf;
-/// Wald & Havran 2006 use `K_T = 15, K_I = 20, λ = 0.8` (`b = 0.2`) and stop at
-/// the first split costlier than a leaf. [`Default`] was chosen by measuring
-/// node visits and triangle tests per ray on the shared scenes: see
-/// docs/BUILDER.md for the table.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BuildConfig {
-    /// `K_T`, the cost of traversing one interior node. Higher values (relative
-    /// to `intersection_cost`) give shallower trees with fuller leaves: fewer
-    /// node visits, more triangle tests. pbrt-v3: 1; Wald & Havran 2006: 15.
-    pub traversal_cost: f32,
-    /// `K_I`, the cost of one ray/triangle test. Higher values (relative to
-    /// `traversal_cost`) split more eagerly: deeper trees, smaller leaves, more
-    /// references per triangle and more memory. pbrt-v3: 80; Wald & Havran 2006: 20.
-    pub intersection_cost: f32,
-    /// Fraction `b` in `[0, 1)` taken off the intersection part of the cost when
-    /// one side of a split holds no triangle: favours cutting off empty space,
-    /// which rays then skip for one node visit. Larger values carve more empty
-    /// leaves (more nodes; with a low `K_T / K_I`, stacks of thin empty slabs
-    /// down to the depth limit). pbrt-v3: 0.5; Wald & Havran 2006: 0.2 (`λ = 0.8`).
-    pub empty_bonus: f32,
-    /// Deepest leaf (root = depth 0). `None` = pbrt-v3's `round(8 + 1.3 · ⌊log2 N⌋)`
-    /// for `N` triangles. Either way capped at [`MAX_TREE_DEPTH`], which sizes the
-    /// GPU traversal stack. A deeper limit lets the SAH isolate small details in
-    /// dense regions; a shallower one bounds memory and the build time when
-    /// triangles overlap heavily (every split then duplicates references).
-    pub max_depth: Option<u32>,
-    /// A node with at most this many triangles becomes a leaf without trying to
-    /// split it (a node with none always does). pbrt-v3: 1; 0 leaves termination
-    /// to the SAH alone, as Wald & Havran 2006 do (a lone triangle may then still
-    /// get empty space cut off around it). Larger values build faster, smaller
-    /// trees with fuller leaves.
-    pub max_leaf_prims: u32,
-    /// Splits costlier than a leaf that one path of the tree may take, in the
-    /// hope that a later split pays off, before the builder makes a leaf
-    /// (pbrt-v3's "bad refines": 2, it gives up at the third; with bad refines
-    /// allowed, pbrt-v3 also makes a leaf when the best split costs more than
-    /// four times the leaf with fewer than 16 triangles). 0 is Wald & Havran's
-    /// automatic termination: a leaf as soon as the best split costs more.
-    pub max_bad_refines: u32,
-    /// "Perfect splits" (Havran 2000; Wald & Havran 2006 §4.3): clip every
-    /// triangle that straddles a split plane to each child's box and use the
-    /// box of the clipped polygon. `false` clips only the triangle's box (as
-    /// pbrt-v3 does), which keeps triangles in cells they do not touch: more
-    /// references, larger leaves, more triangle tests per ray.
-    pub perfect_splits: bool,
-    /// How the split of each node is chosen: the exact sweep everywhere, or
-    /// binned SAH on the large nodes at the top and the sweep below.
-    pub builder: Builder,
-}
-
-/// The split search of the SAH builder.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Builder {
-    /// Wald & Havran 2006's exact O(N log N) sweep at every node: the SAH's
-    /// minimum over every face of every (clipped) triangle box.
-    Sweep,
-    /// Binned SAH (Shevtsov, Soupikov & Kapustin 2007) on nodes of at least
-    /// `min_prims` triangles, `bins` equally spaced planes per axis; the exact
-    /// sweep on smaller nodes. Faster: the large nodes keep no sorted event
-    /// lists. See docs/BUILDER.md for the quality it costs.
-    Binned {
-        /// Planes per axis plus one (at least 2).
-        bins: u32,
-        /// Nodes with at least this many triangles are binned.
-        min_prims: u32,
-    },
-}
-
-impl Builder {
-    /// The binned builder with the measured defaults (docs/BUILDER.md).
-    pub const BINNED: Builder =
-        Builder::Binned { bins: Builder::DEFAULT_BINS, min_prims: Builder::DEFAULT_BINNED_ABOVE };
-    /// Bins per axis of [`Builder::BINNED`].
-    pub const DEFAULT_BINS: u32 = 64;
-    /// Nodes of at least this many triangles are binned by [`Builder::BINNED`].
-    pub const DEFAULT_BINNED_ABOVE: u32 = 4096;
-}
-
-impl BuildConfig {
-    /// pbrt-v3's parameters (`KdTreeAccel`): `K_I = 80, K_T = 1, b = 0.5`, one
-    /// triangle per leaf, two bad refines (with perfect splits, which pbrt lacks).
-    pub const PBRT_V3: BuildConfig = BuildConfig {
-        traversal_cost: 1.0,
-        intersection_cost: 80.0,
-        empty_bonus: 0.5,
-        max_depth: None,
-        max_leaf_prims: 1,
-        max_bad_refines: 2,
-        perfect_splits: true,
-        builder: Builder::Sweep,
-    };
-
-    /// The default, chosen by measurement (docs/BUILDER.md): Wald & Havran's
-    /// termination with a costlier traversal step and a smaller empty bonus,
-    /// `K_T = 30, K_I = 20, b = 0.1`. The node visits plus triangle tests per
-    /// ray of the configurations between Wald & Havran's and twice their `K_T`
-    /// lie within about 1 % of each other on the shared scenes (pbrt-v3's are
-    /// 26 % higher); this one is on that plateau with the fewest nodes (less
-    /// than half of Wald & Havran's), so it builds fastest and takes least memory.
-    /// Its splits are binned on the nodes of 4096 triangles or more
-    /// ([`Builder::BINNED`]), which builds faster at the same node visits plus
-    /// triangle tests per ray (within 1.1 %, docs/BUILDER.md); set `builder`
-    /// to [`Builder::Sweep`] for the exact sweep everywhere.
-    pub const TUNED: BuildConfig = BuildConfig {
-        traversal_cost: 30.0,
-        intersection_cost: 20.0,
-        empty_bonus: 0.1,
-        max_depth: None,
-        max_leaf_prims: 1,
-        max_bad_refines: 0,
-        perfect_splits: true,
-        builder: Builder::BINNED,
-    };
-
-    /// Wald & Havran 2006's costs: `K_T = 15, K_I = 20, λ = 0.8` (`b = 0.2`),
-    /// automatic termination, perfect splits; pbrt-v3's depth limit and one
-    /// triangle per leaf at least.
-    pub const WALD_HAVRAN: BuildConfig = BuildConfig {
-        traversal_cost: 15.0,
-        intersection_cost: 20.0,
-        empty_bonus: 0.2,
-        max_depth: None,
-        max_leaf_prims: 1,
-        max_bad_refines: 0,
-        perfect_splits: true,
-        builder: Builder::Sweep,
-    };
-
-    /// The depth limit for `triangles` triangles: `max_depth`, or pbrt-v3's
-    /// `round(8 + 1.3 · ⌊log2 N⌋)`, never more than [`MAX_TREE_DEPTH`].
-    pub fn depth_limit(&self, triangles: usize) -> u32 {
-        let auto = || {
-            let log2 = if triangles > 1 { triangles.ilog2() } else { 0 };
-            (8.0 + 1.3 * log2 as f64).round() as u32
-        };
-        self.max_depth.unwrap_or_else(auto).min(MAX_TREE_DEPTH)
-    }
-}
-
-impl Default for BuildConfig {
-    /// The measured choice, [`BuildConfig::TUNED`] (docs/BUILDER.md).
-    fn default() -> Self {
-        BuildConfig::TUNED
-    }
-}
 
 /// How far a build has got, for a progress bar: shared with the building
 /// threads, read from any other (see [`KdTree::build_with_progress`]).
@@ -238,42 +82,6 @@ impl BuildProgress {
     pub(crate) fn add_done(&self, units: u64) {
         self.done.fetch_add(units, Ordering::Relaxed);
     }
-}
-
-/// A kd-tree over a triangle list, ready for upload.
-#[derive(Clone, Debug)]
-pub struct KdTree {
-    /// Nodes in depth-first order; `nodes[0]` is the root.
-    pub nodes: Vec<KdNode>,
-    /// Triangle indices (into the `triangles` slice given to [`KdTree::build`])
-    /// referenced by the leaves; a triangle may appear in several leaves.
-    pub prim_indices: Vec<u32>,
-    /// The box of all triangles in the tree ([`Aabb::EMPTY`] when there are none).
-    pub bounds: Aabb,
-    /// Statistics of the tree and its build.
-    pub stats: BuildStats,
-}
-
-/// True when a triangle has a non-finite coordinate.
-pub fn is_non_finite(tri: &[Vec3; 3]) -> bool {
-    !tri.iter().all(|v| v.is_finite())
-}
-
-/// True when a (finite) triangle has zero area: two equal vertices or three
-/// collinear ones. The cross product of the edges is evaluated in f64, where the
-/// products of f32 differences are exact, so the answer is exact for all but
-/// extreme exponent ranges. In exact arithmetic the edge functions of such a
-/// triangle sum to zero for every ray, so the watertight test (Woop, Benthin &
-/// Wald 2013) and the f64 reference never report a hit on it.
-pub fn is_zero_area(tri: &[Vec3; 3]) -> bool {
-    let [a, b, c] = tri.map(|v| v.as_dvec3());
-    (b - a).cross(c - a) == glam::DVec3::ZERO
-}
-
-/// True when the builder leaves the triangle out: a non-finite coordinate (the
-/// scene loader rejects those; this is a safety net) or zero area (never hit).
-pub fn is_skipped(tri: &[Vec3; 3]) -> bool {
-    is_non_finite(tri) || is_zero_area(tri)
 }
 
 /// A triangle's bounding box, with -0.0 turned into +0.0 so that positions
@@ -346,99 +154,17 @@ impl KdTree {
         stage(BuildStage::Finished);
         tree
     }
-
-    /// Visits every node in depth-first order (the order of `nodes`) with its
-    /// index, its box (recomputed from the splits, starting at `bounds`) and its
-    /// depth (root = 0). Iterative; expects a well-formed tree ([`KdTree::check`]).
-    pub fn for_each_node(&self, mut f: impl FnMut(u32, &KdNode, Aabb, u32)) {
-        let mut stack = vec![(0u32, self.bounds, 0u32)];
-        while let Some((index, bounds, depth)) = stack.pop() {
-            let node = &self.nodes[index as usize];
-            f(index, node, bounds, depth);
-            if !node.is_leaf() {
-                let (axis, split) = (node.axis(), node.split());
-                let mut below = bounds;
-                below.max[axis] = split;
-                let mut above = bounds;
-                above.min[axis] = split;
-                stack.push((node.above_child(), above, depth + 1));
-                stack.push((index + 1, below, depth + 1));
-            }
-        }
-    }
-
-    /// Visits every leaf in depth-first order with its node index, the node, its
-    /// recomputed box and its depth (see [`KdTree::for_each_node`]).
-    pub fn for_each_leaf(&self, mut f: impl FnMut(u32, &KdNode, Aabb, u32)) {
-        self.for_each_node(|index, node, bounds, depth| {
-            if node.is_leaf() {
-                f(index, node, bounds, depth)
-            }
-        });
-    }
-
-    /// The primitive indices of a leaf node.
-    pub fn leaf_prims(&self, leaf: &KdNode) -> &[u32] {
-        let offset = leaf.prim_offset() as usize;
-        &self.prim_indices[offset..offset + leaf.prim_count() as usize]
-    }
-
-    /// Checks the structure a traversal relies on, for `triangle_count`
-    /// triangles: every interior node's below child is the next node and its
-    /// above child lies further on; every node is reached exactly once from the
-    /// root; leaves stay within `prim_indices` and reference valid triangles;
-    /// no leaf is deeper than [`MAX_TREE_DEPTH`]; split positions are finite.
-    pub fn check(&self, triangle_count: usize) -> Result<(), String> {
-        if self.nodes.is_empty() {
-            return Err("no nodes".into());
-        }
-        let mut seen = vec![false; self.nodes.len()];
-        let mut stack = vec![(0usize, 0u32)];
-        while let Some((index, depth)) = stack.pop() {
-            let Some(node) = self.nodes.get(index) else {
-                return Err(format!("child index {index} out of range ({} nodes)", self.nodes.len()));
-            };
-            if std::mem::replace(&mut seen[index], true) {
-                return Err(format!("node {index} reached twice"));
-            }
-            if depth > MAX_TREE_DEPTH {
-                return Err(format!("node {index} at depth {depth} > {MAX_TREE_DEPTH}"));
-            }
-            if node.is_leaf() {
-                let (offset, count) = (node.prim_offset() as usize, node.prim_count() as usize);
-                let Some(prims) = self.prim_indices.get(offset..offset + count) else {
-                    return Err(format!("leaf {index}: prims {offset}..{} out of range", offset + count));
-                };
-                if let Some(p) = prims.iter().find(|&&p| p as usize >= triangle_count) {
-                    return Err(format!("leaf {index}: triangle {p} out of range ({triangle_count})"));
-                }
-            } else {
-                let above = node.above_child() as usize;
-                if above <= index + 1 {
-                    return Err(format!("node {index}: above child {above} not after the below child"));
-                }
-                if !node.split().is_finite() {
-                    return Err(format!("node {index}: split {}", node.split()));
-                }
-                stack.push((above, depth + 1));
-                stack.push((index + 1, depth + 1));
-            }
-        }
-        match seen.iter().position(|s| !s) {
-            Some(i) => Err(format!("node {i} unreachable")),
-            None => Ok(()),
-        }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::consts::PRIM_MISS;
+    use crate::consts::{MAX_TREE_DEPTH, PRIM_MISS};
+    use crate::exact::tolerant::{agrees, Agreement};
     use crate::geom::{Hit, Ray, WatertightRay};
-    use crate::kdtree::node::MAX_NODE_FIELD;
+    use crate::kdtree::node::{KdNode, MAX_NODE_FIELD};
     use crate::kdtree::traverse::{trace_ray, SceneRef, Variant};
-    use crate::reference::{agrees, Agreement};
+    use crate::raygen::SplitMix64;
     use glam::DVec3;
 
     /// The binned builder on every node of at least 16 triangles, with few
@@ -447,42 +173,19 @@ mod tests {
     const BINNED_SMALL: BuildConfig =
         BuildConfig { builder: Builder::Binned { bins: 8, min_prims: 16 }, ..BuildConfig::TUNED };
 
-    /// xorshift64* (Vigna 2016): a tiny deterministic generator for the tests.
-    struct Rng(u64);
-
-    impl Rng {
-        fn new(seed: u64) -> Rng {
-            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-        }
-        fn next_u64(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-        /// Uniform in [0, 1).
-        fn f32(&mut self) -> f32 {
-            (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-        }
-        fn range(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (hi - lo) * self.f32()
-        }
-        fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
-            Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-        }
-        fn below(&mut self, n: usize) -> usize {
-            (self.next_u64() % n as u64) as usize
-        }
+    /// A point of the box `[lo, hi)³`.
+    fn vec3(rng: &mut SplitMix64, lo: f32, hi: f32) -> Vec3 {
+        Vec3::new(rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi))
     }
 
     /// `n` triangles in the unit cube, of sizes from tiny up to `size`.
     fn soup(seed: u64, n: usize, size: f32) -> Vec<[Vec3; 3]> {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix64(seed);
         (0..n)
             .map(|_| {
-                let c = rng.vec3(0.0, 1.0);
-                let s = size * rng.f32() * rng.f32() + 1e-4;
-                [c + rng.vec3(-s, s), c + rng.vec3(-s, s), c + rng.vec3(-s, s)]
+                let c = vec3(&mut rng, 0.0, 1.0);
+                let s = size * rng.next_f32() * rng.next_f32() + 1e-4;
+                [c + vec3(&mut rng, -s, s), c + vec3(&mut rng, -s, s), c + vec3(&mut rng, -s, s)]
             })
             .collect()
     }
@@ -719,23 +422,23 @@ mod tests {
     /// Random rays at a scene: aimed at points on triangles, at random points of
     /// the box, axis-parallel ones, origins on split planes, bounded segments.
     fn random_rays(seed: u64, tris: &[[Vec3; 3]], tree: &KdTree, count: usize) -> Vec<Ray> {
-        let mut rng = Rng::new(seed);
+        let mut rng = SplitMix64(seed);
         let b = tree.bounds;
         let (center, size) = (b.center(), b.extent().max_element().max(1e-3));
         let splits: Vec<(usize, f32)> =
             tree.nodes.iter().filter(|n| !n.is_leaf()).map(|n| (n.axis(), n.split())).collect();
         (0..count)
             .map(|k| {
-                let mut origin = center + rng.vec3(-1.0, 1.0) * size;
+                let mut origin = center + vec3(&mut rng, -1.0, 1.0) * size;
                 let target = if k % 2 == 0 {
                     let [v0, v1, v2] = tris[rng.below(tris.len())];
-                    let (mut u, mut v) = (rng.f32(), rng.f32());
+                    let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
                     if u + v > 1.0 {
                         (u, v) = (1.0 - u, 1.0 - v);
                     }
                     v0 + u * (v1 - v0) + v * (v2 - v0)
                 } else {
-                    b.min + rng.vec3(0.0, 1.0) * b.extent()
+                    b.min + vec3(&mut rng, 0.0, 1.0) * b.extent()
                 };
                 let mut dir = target - origin;
                 let (mut tmin, mut tmax) = (0.0, f32::INFINITY);
@@ -788,7 +491,7 @@ mod tests {
                     Agreement::Grazing => {
                         grazing += 1;
                         if std::env::var_os("KDTRACE_TEST_VERBOSE").is_some() {
-                            let reference = crate::reference::closest_hit_f64(tris, ray);
+                            let reference = crate::exact::tolerant::closest_hit_f64(tris, ray);
                             eprintln!("{name}: ray {i} grazing: {ray:?} tracer {hit:?} reference {reference:?}");
                         }
                     }
@@ -914,14 +617,14 @@ mod tests {
 
     /// The structured inputs of the field's pitfalls.
     fn structured() -> Vec<(&'static str, Vec<[Vec3; 3]>)> {
-        let mut rng = Rng::new(99);
+        let mut rng = SplitMix64(99);
         let mut cases = Vec::new();
         cases.push(("empty", Vec::new()));
         cases.push(("one triangle", vec![[Vec3::ZERO, Vec3::X, Vec3::Y]]));
         let axis_plane = (0..500)
             .map(|_| {
-                let c = rng.vec3(0.0, 1.0);
-                let p = |rng: &mut Rng| Vec3::new(c.x + rng.range(-0.1, 0.1), 0.25, c.z + rng.range(-0.1, 0.1));
+                let c = vec3(&mut rng, 0.0, 1.0);
+                let p = |rng: &mut SplitMix64| Vec3::new(c.x + rng.range(-0.1, 0.1), 0.25, c.z + rng.range(-0.1, 0.1));
                 [p(&mut rng), p(&mut rng), p(&mut rng)]
             })
             .collect();
@@ -929,7 +632,7 @@ mod tests {
         let (n, d) = (Vec3::new(1.0, 2.0, 3.0).normalize(), 0.3);
         let tilted = (0..500)
             .map(|_| {
-                let c = rng.vec3(0.0, 1.0);
+                let c = vec3(&mut rng, 0.0, 1.0);
                 let c = c - (c.dot(n) - d) * n;
                 let e1 = n.any_orthonormal_vector();
                 let e2 = n.cross(e1);
@@ -942,15 +645,15 @@ mod tests {
         cases.push(("1000 identical", vec![t; 1000]));
         let needles = (0..1000)
             .map(|_| {
-                let a = rng.vec3(0.0, 1.0);
-                let b = rng.vec3(0.0, 1.0);
-                [a, b, b + rng.vec3(-1e-4, 1e-4)]
+                let a = vec3(&mut rng, 0.0, 1.0);
+                let b = vec3(&mut rng, 0.0, 1.0);
+                [a, b, b + vec3(&mut rng, -1e-4, 1e-4)]
             })
             .collect();
         cases.push(("needles", needles));
         let mut mixed = soup(5, 300, 0.2);
         for i in 0..300 {
-            let v = rng.vec3(0.0, 1.0);
+            let v = vec3(&mut rng, 0.0, 1.0);
             mixed.insert(i * 2, if i % 2 == 0 { [v, v, v] } else { [v, v + Vec3::X, v + 2.0 * Vec3::X] });
         }
         mixed.push([Vec3::new(f32::NAN, 0.0, 0.0), Vec3::X, Vec3::Y]);
@@ -959,7 +662,7 @@ mod tests {
         let v = Vec3::new(0.3, -0.0, 0.7);
         cases.push(("100k at one point", vec![[v, v, v]; 100_000]));
         // Every triangle shares the point v: no plane separates them well.
-        let tiny = (0..2_000).map(|_| [v, v + rng.vec3(-1e-6, 1e-6), v + rng.vec3(-1e-6, 1e-6)]).collect();
+        let tiny = (0..2_000).map(|_| [v, v + vec3(&mut rng, -1e-6, 1e-6), v + vec3(&mut rng, -1e-6, 1e-6)]).collect();
         cases.push(("2k tiny at one point", tiny));
         let mut grid = Vec::new();
         for i in 0..20 {
@@ -1150,10 +853,10 @@ mod tests {
     /// and memory (about a minute in the test profile on 2 cores).
     #[test]
     fn hundred_thousand_triangles_at_one_point() {
-        let mut rng = Rng::new(5);
+        let mut rng = SplitMix64(5);
         let v = Vec3::new(0.3, -0.0, 0.7);
         let mut tris: Vec<[Vec3; 3]> =
-            (0..100_000).map(|_| [v, v + rng.vec3(-1e-6, 1e-6), v + rng.vec3(-1e-6, 1e-6)]).collect();
+            (0..100_000).map(|_| [v, v + vec3(&mut rng, -1e-6, 1e-6), v + vec3(&mut rng, -1e-6, 1e-6)]).collect();
         tris.extend(vec![[v, v, v]; 100_000]);
         // The default configuration here; `BuildConfig::PBRT_V3` takes as long again
         // (run it with `cargo test --release` when changing the builder).

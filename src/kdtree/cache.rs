@@ -51,9 +51,11 @@ use bytemuck::Pod;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::build::{BuildConfig, BuildProgress, KdTree};
+use super::build::BuildProgress;
+use super::config::BuildConfig;
 use super::node::{KdNode, MAX_NODE_FIELD};
 use super::stats::BuildStats;
+use super::tree::KdTree;
 use crate::geom::Aabb;
 
 /// The first 8 bytes of every tree cache file.

@@ -2,8 +2,9 @@
 //! across builder settings (the figures of Wald & Havran 2006, Table 1, and of
 //! pbrt-v3's `KdTreeAccel` statistics).
 
-use super::build::{BuildConfig, KdTree};
-use super::KdNode;
+use super::config::BuildConfig;
+use super::node::KdNode;
+use super::tree::KdTree;
 use crate::geom::Aabb;
 
 /// What a build produced. Computed once, after the build, by walking the tree.

@@ -2,16 +2,25 @@
 //! occlusion, path-traced diffuse light, all passes on the device), camera rays,
 //! tone mapping and image output (PNG, linear EXR), and cost heatmaps.
 
+mod abi;
+mod output;
+mod passes;
+mod plan;
+mod resources;
+mod sample;
+mod settings;
 mod wavefront;
 
 use std::path::Path;
 
 use glam::Vec3;
 
-pub use wavefront::{
-    ld2, render, render_progressive, PointLight, Primary, RenderOutput, RenderParams, RenderPlan, RenderSettings,
-    RenderStats, MAX_LIGHTS,
-};
+pub use abi::RenderParams;
+pub use output::{RenderOutput, RenderStats};
+pub use plan::RenderPlan;
+pub use sample::ld2;
+pub use settings::{PointLight, Primary, RenderSettings, MAX_LIGHTS};
+pub use wavefront::{render, render_progressive};
 
 use crate::geom::{Hit, Ray};
 use crate::scene::{Camera, Scene};

@@ -16,6 +16,7 @@ pub use camera::Camera;
 
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
+use crate::kdtree::tree::is_zero_area;
 
 /// A surface material, from an MTL `newmtl` block.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,7 +82,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// The box around all triangles.
     pub bounds: Aabb,
-    /// Number of zero-area triangles (kept so that numbering is preserved).
+    /// Number of zero-area triangles ([`crate::kdtree::tree::is_zero_area`], the
+    /// builder's rule), kept so that numbering is preserved.
     pub degenerate_count: usize,
 }
 
@@ -186,15 +188,9 @@ impl Scene {
         materials: Vec<Material>,
     ) -> Scene {
         let bounds = triangles.iter().fold(Aabb::EMPTY, |b, t| b.grow(t[0]).grow(t[1]).grow(t[2]));
-        let degenerate_count = triangles.iter().filter(|t| is_degenerate(t)).count();
+        let degenerate_count = triangles.iter().filter(|t| is_zero_area(t)).count();
         Scene { path, triangles, material_ids, materials, bounds, degenerate_count }
     }
-}
-
-/// True when the triangle has zero area: its edge cross product is exactly zero
-/// in f32 (repeated or collinear vertices).
-pub fn is_degenerate(t: &[Vec3; 3]) -> bool {
-    (t[1] - t[0]).cross(t[2] - t[0]) == Vec3::ZERO
 }
 
 #[cfg(test)]

@@ -49,33 +49,8 @@ pub fn fetched_scene(name: &str) -> Option<PathBuf> {
     None
 }
 
-/// A small seeded generator (xorshift64*), so tests need no extra crate.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in [0, 1).
-    pub fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-    pub fn unit_vector(&mut self) -> Vec3 {
-        loop {
-            let v = Vec3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
-            let l = v.length_squared();
-            if l > 1e-4 && l <= 1.0 {
-                return v / l.sqrt();
-            }
-        }
-    }
-}
+/// The seeded generator of the tests: the library's.
+pub use kdtrace::raygen::SplitMix64 as Rng;
 
 /// Rays from random points of the box (grown by 10%) in random directions.
 pub fn random_rays(rng: &mut Rng, min: Vec3, max: Vec3, count: usize) -> Vec<Ray> {

@@ -800,11 +800,11 @@ mod tests {
 
     #[test]
     fn radix_sort_sorts_events_made_in_triangle_order() {
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rng = crate::raygen::SplitMix64(0x9E37_79B9_7F4A_7C15);
         for len in [0, 1, 100, 5000, 70_000] {
             let mut events = Vec::new();
             for i in 0..len as u32 {
-                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let seed = rng.next_u64();
                 // Few distinct positions (many equal ones), some negative, some flat boxes.
                 let lo = ((seed >> 33) % 64) as f32 - 20.0;
                 let hi = if seed % 5 == 0 { lo } else { lo + ((seed >> 20) % 9) as f32 * 0.25 };

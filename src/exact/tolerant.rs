@@ -1,5 +1,8 @@
-//! A brute-force reference intersector in f64, and the rule tests use to compare
-//! the hits of a tracer (CPU or GPU, f32) with it.
+//! The float64 comparison with tolerances: the closest hit by brute force in
+//! f64, and [`agrees`], the rule the builder's and the GPU tracer's random-ray
+//! tests use to compare a tracer's hits (f32) with it, checking `t` and the
+//! barycentrics as well as the triangle. Cheaper than the exact answer of the
+//! parent module, and answers "close enough" where that one answers "exactly".
 //!
 //! The test is the watertight ray/triangle test of Woop, Benthin & Wald 2013
 //! ("Watertight Ray/Triangle Intersection", JCGT 2(1)) evaluated in f64 on the
@@ -12,7 +15,7 @@
 //! and non-finite triangles are never hit, as in the kd-tree builder
 //! ([`crate::kdtree::build::is_skipped`]).
 //!
-//! The f32 tracer and this reference round differently, so hits within a few
+//! The f32 tracer and this comparison round differently, so hits within a few
 //! f32 ulps of an edge, of the ray's bounds, or at equal distances may differ
 //! legitimately. [`agrees`] separates those cases from real disagreements.
 //! Everything here is O(triangles) per ray: for tests only.
@@ -348,16 +351,7 @@ pub fn agrees(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit) -> Agreement {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn quad() -> Vec<[Vec3; 3]> {
-        // Two triangles sharing the diagonal (0,0,0)-(1,1,0) of the unit square in z = 0,
-        // and one more at z = 1 covering the same square.
-        vec![
-            [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)],
-            [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)],
-            [Vec3::new(-1.0, -1.0, 1.0), Vec3::new(3.0, -1.0, 1.0), Vec3::new(-1.0, 3.0, 1.0)],
-        ]
-    }
+    use crate::exact::tests::quad;
 
     fn down(x: f32, y: f32) -> Ray {
         Ray::new(Vec3::new(x, y, 2.0), Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY)

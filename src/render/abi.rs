@@ -1,0 +1,114 @@
+//! The renderer's side of its contract with `glsl/shared/render.glsl`: the push
+//! constants, the std430 structs of the scene buffers, the material flags, the
+//! counter indices and the ray generation's jitter modes. Each mirrors a
+//! declaration there; the sizes are tested below.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Material flags, as `render.glsl`'s `MAT_*`.
+pub(super) const MAT_DIFFUSE: u32 = 1;
+pub(super) const MAT_GLOSSY: u32 = 2;
+pub(super) const MAT_MIRROR: u32 = 4;
+pub(super) const MAT_EMISSIVE: u32 = 8;
+
+/// Indices of the render counters (`RC_*` in `render.glsl`).
+pub(super) const RC_NEXT: usize = 0;
+pub(super) const RC_SHADOW: usize = 1;
+pub(super) const RC_BAD_RAYS: usize = 2;
+pub(super) const RC_OVERFLOW: usize = 3;
+pub(super) const RC_RASTER_EDGE: usize = 4;
+pub(super) const RC_COUNT: usize = 5;
+
+/// Jitter modes of `render_raygen.comp` (its specialization constant 0).
+pub(super) const JITTER_NONE: u32 = 0;
+pub(super) const JITTER_PER_PIXEL: u32 = 1;
+pub(super) const JITTER_PER_SAMPLE: u32 = 2;
+
+/// Push constants of the render passes (`RenderParams` in `render.glsl`), 128 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RenderParams {
+    /// xyz: the eye; w: the bits of the first pixel index of this chunk.
+    pub eye: [f32; 4],
+    /// xyz: unit view direction; w: the emitters' total weight (Σ area × luminance of Ke).
+    pub forward: [f32; 4],
+    /// xyz: right × tan(fov/2) × aspect; w: the sample's jitter x when one
+    /// jitter serves the whole image (rasterized first hits).
+    pub right: [f32; 4],
+    /// xyz: up × tan(fov/2); w: that jitter's y.
+    pub up: [f32; 4],
+    /// xyz: background radiance; w: ambient radiance (ambient occlusion).
+    pub background: [f32; 4],
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Paths (or pixels) in this dispatch.
+    pub count: u32,
+    /// Which sample of each pixel.
+    pub sample_index: u32,
+    /// Seed of the sample sequence.
+    pub seed: u32,
+    /// Ray segments per path at most.
+    pub max_depth: u32,
+    /// Diffuse bounces per path at most.
+    pub bounces: u32,
+    /// Ambient-occlusion rays per first diffuse hit.
+    pub ao_samples: u32,
+    /// Their length.
+    pub ao_radius: f32,
+    /// Point lights.
+    pub light_count: u32,
+    /// Emissive triangles.
+    pub emitter_count: u32,
+    /// Shadow rays the shadow queue holds.
+    pub shadow_capacity: u32,
+}
+
+/// `Surface` of `render.glsl`: the vertices, the material id's bits in `v0.w`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct Surface {
+    pub(super) v: [[f32; 4]; 3],
+}
+
+/// `Material` of `render.glsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct GpuMaterial {
+    pub(super) kd_ns: [f32; 4],
+    pub(super) ks_flags: [f32; 4],
+    pub(super) ke: [f32; 4],
+}
+
+/// `Emitter` of `render.glsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(super) struct Emitter {
+    pub(super) prim: u32,
+    pub(super) cdf: f32,
+    pub(super) pick: f32,
+    pub(super) area: f32,
+}
+
+/// `PointLight` of `render.glsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct GpuLight {
+    pub(super) position: [f32; 4],
+    pub(super) intensity: [f32; 4],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn push_constants_fit_the_guaranteed_128_bytes() {
+        assert_eq!(std::mem::size_of::<RenderParams>(), 128);
+        assert_eq!(std::mem::size_of::<Surface>(), 48);
+        assert_eq!(std::mem::size_of::<GpuMaterial>(), 48);
+        assert_eq!(std::mem::size_of::<Emitter>(), 16);
+        assert_eq!(std::mem::size_of::<GpuLight>(), 32);
+    }
+}
