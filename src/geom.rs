@@ -403,7 +403,7 @@ impl WatertightRay {
     /// ray's bounds: the vertices sheared as in the f32 test but scaled by
     /// `|dir[kz]|` instead of divided by `dir[kz]`, so each vertex's 2D
     /// coordinates are the same for every triangle sharing it, and 2D edge
-    /// functions with exact signs ([`diff_of_products`]): the triangles around an
+    /// functions with exact signs (`diff_of_products`): the triangles around an
     /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
     /// of them, never none.
     ///

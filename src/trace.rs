@@ -168,7 +168,7 @@ pub struct TraceResult {
 
 impl TraceResult {
     /// Indices of the rays that did not finish traversal (hit `prim_id` ==
-    /// [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE), `t` NaN): the step
+    /// [`PRIM_INCOMPLETE`], `t` NaN): the step
     /// cap ([`MAX_TRAVERSAL_STEPS`](crate::consts::MAX_TRAVERSAL_STEPS)) or a
     /// driver's loop cut-off. Every other hit is a finished answer.
     pub fn incomplete(&self) -> Vec<usize> {
@@ -176,7 +176,7 @@ impl TraceResult {
     }
 }
 
-/// Indices of the hits marked [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE).
+/// Indices of the hits marked [`PRIM_INCOMPLETE`].
 pub fn incomplete_rays(hits: &[Hit]) -> Vec<usize> {
     hits.iter().enumerate().filter(|(_, h)| h.prim_id == PRIM_INCOMPLETE).map(|(i, _)| i).collect()
 }
@@ -973,7 +973,7 @@ impl Tracer {
 
     /// Traces `rays` (any number: they go in chunks) and returns the closest hit of
     /// each. A ray that did not finish traversal is returned marked
-    /// [`PRIM_INCOMPLETE`](crate::consts::PRIM_INCOMPLETE) (see
+    /// [`PRIM_INCOMPLETE`] (see
     /// [`TraceResult::incomplete`]); the batch never fails for it.
     /// The convenient path: kdtrace uploads the rays, submits on the context's
     /// queue, waits and reads the hits back (built on [`Tracer::bind`] and
