@@ -3,7 +3,8 @@
 
 use glam::Vec3;
 
-use super::abi::{Emitter, MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR};
+use super::abi::Emitter;
+use super::consts::{MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR};
 use super::settings::{Primary, RenderSettings};
 use crate::error::Result;
 use crate::scene::Scene;
