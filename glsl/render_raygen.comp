@@ -14,7 +14,7 @@ layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 // JITTER_NONE: pixel centres; JITTER_PER_PIXEL: a jitter per pixel and sample;
 // JITTER_PER_SAMPLE: one jitter per sample for the whole image (what a rasterized
 // first hit can follow). Values from src/render/consts.rs.
-layout(constant_id = 0) const uint JITTER = JITTER_PER_PIXEL;
+layout(constant_id = RAYGEN_SPEC_JITTER) const uint JITTER = JITTER_PER_PIXEL;
 
 layout(std430, set = 0, binding = RAYGEN_BINDING_PIXELS) readonly buffer Pixels { uint pixels[]; };
 layout(std430, set = 0, binding = RAYGEN_BINDING_RAYS) writeonly buffer Rays { Ray rays[]; };

@@ -16,15 +16,15 @@
 
 layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-layout(constant_id = 0) const bool HEADLIGHT = false;    // eye light, no shadow rays
-layout(constant_id = 1) const bool POINT_LIGHTS = true;  // --light
-layout(constant_id = 2) const bool AREA_LIGHTS = true;   // emissive triangles (Ke)
-layout(constant_id = 3) const bool MIRRORS = true;       // illum 3 materials
-layout(constant_id = 4) const bool GLOSSY = true;        // illum 2 highlights
-layout(constant_id = 5) const bool AO = true;            // --ao N
-layout(constant_id = 6) const bool BOUNCES = true;       // --bounces N
-layout(constant_id = 7) const bool CONTINUE = true;      // a next queue exists
-layout(constant_id = 8) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
+layout(constant_id = SHADE_SPEC_HEADLIGHT) const bool HEADLIGHT = false;    // eye light, no shadow rays
+layout(constant_id = SHADE_SPEC_POINT_LIGHTS) const bool POINT_LIGHTS = true;  // --light
+layout(constant_id = SHADE_SPEC_AREA_LIGHTS) const bool AREA_LIGHTS = true;   // emissive triangles (Ke)
+layout(constant_id = SHADE_SPEC_MIRRORS) const bool MIRRORS = true;       // illum 3 materials
+layout(constant_id = SHADE_SPEC_GLOSSY) const bool GLOSSY = true;        // illum 2 highlights
+layout(constant_id = SHADE_SPEC_AO) const bool AO = true;            // --ao N
+layout(constant_id = SHADE_SPEC_BOUNCES) const bool BOUNCES = true;       // --bounces N
+layout(constant_id = SHADE_SPEC_CONTINUE) const bool CONTINUE = true;      // a next queue exists
+layout(constant_id = SHADE_SPEC_HEADLIGHT_SHADOWS) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
 
 layout(std430, set = 0, binding = SHADE_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_MATERIALS) readonly buffer Materials { Material materials[]; };

@@ -15,7 +15,7 @@
 
 layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-layout(constant_id = 0) const bool ROBUST = true;
+layout(constant_id = VISIBILITY_SPEC_ROBUST) const bool ROBUST = true;
 const bool SEGMENT_FRAME = false;  // camera rays are never moved (see trace.comp)
 
 #include "triangle.glsl"

@@ -63,6 +63,18 @@ pub struct RenderParams {
     pub shadow_capacity: u32,
 }
 
+/// The entries of a descriptor set (buffers in binding order) or of a kernel's
+/// specialization constants (values in id order), from `(binding or id, entry)`
+/// pairs in any order; each of `0..N` exactly once.
+pub(super) fn in_order<T: Copy, const N: usize>(entries: [(u32, T); N]) -> [T; N] {
+    let mut out: [Option<T>; N] = [None; N];
+    for (index, entry) in entries {
+        let slot = &mut out[index as usize];
+        assert!(slot.replace(entry).is_none(), "binding or id {index} given twice");
+    }
+    out.map(|e| e.expect("every binding or id given"))
+}
+
 /// `Path` of `render.glsl`: written and read by the kernels only, mirrored for its size.
 #[allow(dead_code)]
 #[repr(C)]

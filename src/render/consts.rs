@@ -112,6 +112,36 @@ pub const VISIBILITY_BINDING_COUNTERS: u32 = 5;
 /// Number of bindings of `render_visibility.comp`.
 pub const VISIBILITY_BINDINGS: u32 = 6;
 
+// Specialization constant ids of the render kernels (32-bit each; bools as 0/1).
+/// `render_raygen.comp`'s jitter mode (`JITTER_*`).
+pub const RAYGEN_SPEC_JITTER: u32 = 0;
+/// Number of specialization constants of `render_raygen.comp`.
+pub const RAYGEN_SPECS: u32 = 1;
+/// `render_shade.comp`: The eye light, no shadow rays (`bool`).
+pub const SHADE_SPEC_HEADLIGHT: u32 = 0;
+/// `render_shade.comp`: Point lights (`--light`).
+pub const SHADE_SPEC_POINT_LIGHTS: u32 = 1;
+/// `render_shade.comp`: Emissive triangles (Ke).
+pub const SHADE_SPEC_AREA_LIGHTS: u32 = 2;
+/// `render_shade.comp`: Mirrors (illum 3 materials).
+pub const SHADE_SPEC_MIRRORS: u32 = 3;
+/// `render_shade.comp`: Glossy highlights (illum 2).
+pub const SHADE_SPEC_GLOSSY: u32 = 4;
+/// `render_shade.comp`: Ambient occlusion (`--ao N`).
+pub const SHADE_SPEC_AO: u32 = 5;
+/// `render_shade.comp`: Diffuse bounces (`--bounces N`).
+pub const SHADE_SPEC_BOUNCES: u32 = 6;
+/// `render_shade.comp`: A next queue exists: paths continue.
+pub const SHADE_SPEC_CONTINUE: u32 = 7;
+/// `render_shade.comp`: Trace the eye light's visibility (`--no-skip`).
+pub const SHADE_SPEC_HEADLIGHT_SHADOWS: u32 = 8;
+/// Number of specialization constants of `render_shade.comp`.
+pub const SHADE_SPECS: u32 = 9;
+/// `render_visibility.comp`: the robust ray test of rasterized hits (`bool`).
+pub const VISIBILITY_SPEC_ROBUST: u32 = 0;
+/// Number of specialization constants of `render_visibility.comp`.
+pub const VISIBILITY_SPECS: u32 = 1;
+
 /// Every constant above, as `#define`s for the shaders (read by build.rs).
 #[allow(dead_code)]
 pub const RENDER_SHADER_DEFINES: &[(&str, u32)] = &[
@@ -158,4 +188,15 @@ pub const RENDER_SHADER_DEFINES: &[(&str, u32)] = &[
     ("VISIBILITY_BINDING_RAYS", VISIBILITY_BINDING_RAYS),
     ("VISIBILITY_BINDING_HITS", VISIBILITY_BINDING_HITS),
     ("VISIBILITY_BINDING_COUNTERS", VISIBILITY_BINDING_COUNTERS),
+    ("RAYGEN_SPEC_JITTER", RAYGEN_SPEC_JITTER),
+    ("SHADE_SPEC_HEADLIGHT", SHADE_SPEC_HEADLIGHT),
+    ("SHADE_SPEC_POINT_LIGHTS", SHADE_SPEC_POINT_LIGHTS),
+    ("SHADE_SPEC_AREA_LIGHTS", SHADE_SPEC_AREA_LIGHTS),
+    ("SHADE_SPEC_MIRRORS", SHADE_SPEC_MIRRORS),
+    ("SHADE_SPEC_GLOSSY", SHADE_SPEC_GLOSSY),
+    ("SHADE_SPEC_AO", SHADE_SPEC_AO),
+    ("SHADE_SPEC_BOUNCES", SHADE_SPEC_BOUNCES),
+    ("SHADE_SPEC_CONTINUE", SHADE_SPEC_CONTINUE),
+    ("SHADE_SPEC_HEADLIGHT_SHADOWS", SHADE_SPEC_HEADLIGHT_SHADOWS),
+    ("VISIBILITY_SPEC_ROBUST", VISIBILITY_SPEC_ROBUST),
 ];

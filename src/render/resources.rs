@@ -8,8 +8,8 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use super::abi::{
-    GpuLight, GpuMaterial, RenderParams, Surface, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, PATH_BYTES, RAY_BYTES,
-    SPAN_BYTES,
+    in_order, GpuLight, GpuMaterial, RenderParams, Surface, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, PATH_BYTES,
+    RAY_BYTES, SPAN_BYTES,
 };
 use super::consts::*;
 use super::passes::TIMESTAMP_PAIRS;
@@ -25,17 +25,6 @@ type Ctx = std::sync::Arc<GpuContext>;
 
 /// Bytes of push constants of every render kernel: one [`RenderParams`].
 const PUSH_CONSTANT_SIZE: u32 = std::mem::size_of::<RenderParams>() as u32;
-
-/// The buffers of a descriptor set in binding order, from `(binding, buffer)`
-/// pairs in any order; each binding `0..N` exactly once.
-fn by_binding<const N: usize>(entries: [(u32, &Buffer); N]) -> [&Buffer; N] {
-    let mut out: [Option<&Buffer>; N] = [None; N];
-    for (binding, buffer) in entries {
-        let slot = &mut out[binding as usize];
-        assert!(slot.replace(buffer).is_none(), "binding {binding} given twice");
-    }
-    out.map(|b| b.expect("every binding given"))
-}
 
 /// Bytes of device memory the shadow queue may take (rays, weights, hits).
 const SHADOW_QUEUE_BYTES: u64 = 256 << 20;
@@ -109,11 +98,14 @@ impl Kernels {
                 spirv: shaders::RENDER_RAYGEN,
                 bindings: RAYGEN_BINDINGS,
                 push_constant_size: PUSH_CONSTANT_SIZE,
-                spec_constants: &[match (plan.jitter, plan.raster) {
-                    (false, _) => JITTER_NONE,
-                    (true, false) => JITTER_PER_PIXEL,
-                    (true, true) => JITTER_PER_SAMPLE,
-                }],
+                spec_constants: &in_order::<_, { RAYGEN_SPECS as usize }>([(
+                    RAYGEN_SPEC_JITTER,
+                    match (plan.jitter, plan.raster) {
+                        (false, _) => JITTER_NONE,
+                        (true, false) => JITTER_PER_PIXEL,
+                        (true, true) => JITTER_PER_SAMPLE,
+                    },
+                )]),
                 workgroup_size: RENDER_WORKGROUP_SIZE,
                 ..Default::default()
             },
@@ -294,7 +286,7 @@ impl Sets {
         let raygen = BufferSet::new(
             ctx,
             &kernels.raygen,
-            &by_binding::<{ RAYGEN_BINDINGS as usize }>([
+            &in_order::<_, { RAYGEN_BINDINGS as usize }>([
                 (RAYGEN_BINDING_PIXELS, &data.pixels),
                 (RAYGEN_BINDING_RAYS, &q.a.rays),
                 (RAYGEN_BINDING_PATHS, &q.a.paths),
@@ -304,7 +296,7 @@ impl Sets {
             BufferSet::new(
                 ctx,
                 &kernels.shade,
-                &by_binding::<{ SHADE_BINDINGS as usize }>([
+                &in_order::<_, { SHADE_BINDINGS as usize }>([
                     (SHADE_BINDING_SURFACES, &data.surfaces),
                     (SHADE_BINDING_MATERIALS, &data.materials),
                     (SHADE_BINDING_EMITTERS, &data.emitters),
@@ -329,7 +321,7 @@ impl Sets {
                     BufferSet::new(
                         ctx,
                         k,
-                        &by_binding::<{ RESOLVE_BINDINGS as usize }>([
+                        &in_order::<_, { RESOLVE_BINDINGS as usize }>([
                             (RESOLVE_BINDING_PATHS, &p.paths),
                             (RESOLVE_BINDING_SPANS, &q.spans),
                             (RESOLVE_BINDING_SHADOW_HITS, shadow_hits),
@@ -373,7 +365,10 @@ impl RasterPass {
                 spirv: shaders::RENDER_VISIBILITY,
                 bindings: VISIBILITY_BINDINGS,
                 push_constant_size: PUSH_CONSTANT_SIZE,
-                spec_constants: &[u32::from(settings.traversal.robust)],
+                spec_constants: &in_order::<_, { VISIBILITY_SPECS as usize }>([(
+                    VISIBILITY_SPEC_ROBUST,
+                    u32::from(settings.traversal.robust),
+                )]),
                 workgroup_size: RENDER_WORKGROUP_SIZE,
                 ..Default::default()
             },
@@ -381,7 +376,7 @@ impl RasterPass {
         let set = BufferSet::new(
             ctx,
             &kernel,
-            &by_binding::<{ VISIBILITY_BINDINGS as usize }>([
+            &in_order::<_, { VISIBILITY_BINDINGS as usize }>([
                 (VISIBILITY_BINDING_PIXELS, &data.pixels),
                 (VISIBILITY_BINDING_VISIBILITY, &visibility),
                 (VISIBILITY_BINDING_SURFACES, &data.surfaces),
