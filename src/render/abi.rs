@@ -134,5 +134,27 @@ mod tests {
         assert_eq!(std::mem::size_of::<GpuMaterial>(), 48);
         assert_eq!(std::mem::size_of::<Emitter>(), 16);
         assert_eq!(std::mem::size_of::<GpuLight>(), 32);
+        // Field order as declared in render.glsl (tests/layout.rs checks the shaders' side).
+        use std::mem::offset_of;
+        assert_eq!(
+            [offset_of!(GpuMaterial, kd_ns), offset_of!(GpuMaterial, ks_flags), offset_of!(GpuMaterial, ke)],
+            [0, 16, 32]
+        );
+        assert_eq!(
+            [offset_of!(Emitter, prim), offset_of!(Emitter, cdf), offset_of!(Emitter, pick), offset_of!(Emitter, area)],
+            [0, 4, 8, 12]
+        );
+        assert_eq!([offset_of!(GpuLight, position), offset_of!(GpuLight, intensity)], [0, 16]);
+        assert_eq!(
+            [
+                offset_of!(GpuPath, throughput),
+                offset_of!(GpuPath, pixel),
+                offset_of!(GpuPath, flags),
+                offset_of!(GpuPath, depth),
+                offset_of!(GpuPath, diffuse),
+                offset_of!(GpuPath, pad)
+            ],
+            [0, 12, 16, 20, 24, 28]
+        );
     }
 }
