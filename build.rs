@@ -1,14 +1,17 @@
 //! Compiles every kernel `glsl/*.comp` (and the graphics stages `glsl/*.vert`, `*.frag`) to SPIR-V with shaderc and writes
 //! `$OUT_DIR/shaders.rs`, which embeds them. `#include "x.glsl"` resolves against
 //! `glsl/shared/`, `glsl/traverse/` and `glsl/`. Shared constants come from
-//! `src/consts.rs` as `#define`s, so Rust and GLSL see one definition.
+//! `src/consts.rs` and `src/render/consts.rs` as `#define`s, so Rust and GLSL
+//! see one definition.
 //! A shader error fails the build with `file:line: message`.
 //!
 //! It also writes the users' GLSL header `$OUT_DIR/kdtrace.glsl` (the special
 //! `prim_id`s and counter indices as `#define`s, then `glsl/shared/ray.glsl`),
 //! embedded as `shaders::HEADER`, and compiles the example shaders
 //! `glsl/examples/*.comp` against that header alone (no other defines or include
-//! directories, as a user's shader would be) into `shaders::EXAMPLE_*`.
+//! directories, as a user's shader would be) and the engine's own constants of
+//! `glsl/examples/abi.rs` (as `#define`s, as a user's build would pass its own)
+//! into `shaders::EXAMPLE_*`.
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs;
@@ -19,14 +22,27 @@ mod consts {
     include!("src/consts.rs");
 }
 
+#[allow(dead_code)]
+mod render_consts {
+    include!("src/render/consts.rs");
+}
+
+#[allow(dead_code)]
+mod example_consts {
+    include!("glsl/examples/abi.rs");
+}
+
 fn main() -> Result<()> {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR")?);
     let glsl = root.join("glsl");
     println!("cargo:rerun-if-changed=glsl");
     println!("cargo:rerun-if-changed=src/consts.rs");
+    println!("cargo:rerun-if-changed=src/render/consts.rs");
 
     let compiler = shaderc::Compiler::new().map_err(|e| anyhow!("shaderc: cannot create compiler: {e}"))?;
     let include_dirs = [glsl.join("shared"), glsl.join("traverse"), glsl.clone()];
+    let kernel_defines: Vec<(&str, u32)> =
+        consts::SHADER_DEFINES.iter().chain(render_consts::RENDER_SHADER_DEFINES).copied().collect();
 
     let mut kernels: Vec<PathBuf> = fs::read_dir(&glsl)
         .with_context(|| format!("reading {}", glsl.display()))?
@@ -59,7 +75,7 @@ fn main() -> Result<()> {
 
     let mut errors = Vec::new();
     for path in &kernels {
-        match compile(&compiler, path, &include_dirs, true) {
+        match compile(&compiler, path, &include_dirs, &kernel_defines) {
             Ok(words) => {
                 let stem = path.file_stem().unwrap().to_string_lossy().to_string();
                 let ext = path.extension().unwrap().to_string_lossy().to_string();
@@ -77,7 +93,7 @@ fn main() -> Result<()> {
         }
     }
 
-    // The example's shaders see the users' header only.
+    // The example's shaders see the users' header and the engine's own defines only.
     let examples = glsl.join("examples");
     let mut example_shaders: Vec<PathBuf> = fs::read_dir(&examples)
         .into_iter()
@@ -88,7 +104,7 @@ fn main() -> Result<()> {
     example_shaders.sort();
     let example_dirs = [out_dir.clone(), examples.clone()];
     for path in &example_shaders {
-        match compile(&compiler, path, &example_dirs, false) {
+        match compile(&compiler, path, &example_dirs, example_consts::EXAMPLE_SHADER_DEFINES) {
             Ok(words) => {
                 let stem = path.file_stem().unwrap().to_string_lossy().to_string();
                 let spv = out_dir.join(format!("example_{stem}.spv"));
@@ -137,7 +153,6 @@ fn bytemuck_bytes(words: &[u32]) -> Vec<u8> {
     words.iter().flat_map(|w| w.to_le_bytes()).collect()
 }
 
-/// Compiles one compute shader; `defines`: pass the shared constants as `#define`s.
 /// The shader stage of `glsl/NAME.{comp,vert,frag}`.
 fn shader_kind(path: &Path) -> shaderc::ShaderKind {
     match path.extension().and_then(|e| e.to_str()) {
@@ -147,7 +162,13 @@ fn shader_kind(path: &Path) -> shaderc::ShaderKind {
     }
 }
 
-fn compile(compiler: &shaderc::Compiler, path: &Path, include_dirs: &[PathBuf], defines: bool) -> Result<Vec<u32>> {
+/// Compiles one shader; `defines`: the constants passed as `#define NAME valueu`.
+fn compile(
+    compiler: &shaderc::Compiler,
+    path: &Path,
+    include_dirs: &[PathBuf],
+    defines: &[(&str, u32)],
+) -> Result<Vec<u32>> {
     let source = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut options = shaderc::CompileOptions::new().map_err(|e| anyhow!("shaderc options: {e}"))?;
     // Vulkan 1.2 / SPIR-V 1.5: no LocalSizeId, so no maintenance4 requirement.
@@ -155,10 +176,8 @@ fn compile(compiler: &shaderc::Compiler, path: &Path, include_dirs: &[PathBuf], 
     options.set_target_spirv(shaderc::SpirvVersion::V1_5);
     options.set_optimization_level(shaderc::OptimizationLevel::Performance);
     options.set_generate_debug_info();
-    if defines {
-        for (name, value) in consts::SHADER_DEFINES {
-            options.add_macro_definition(name, Some(&format!("{value}u")));
-        }
+    for (name, value) in defines {
+        options.add_macro_definition(name, Some(&format!("{value}u")));
     }
     let dirs = include_dirs.to_vec();
     options.set_include_callback(move |requested, _kind, requester, _depth| {

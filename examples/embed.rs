@@ -37,8 +37,12 @@ use kdtrace::scene::{Camera, Scene};
 use kdtrace::trace::{TraceOptions, Tracer};
 use kdtrace::{Hit, Ray};
 
-/// Invocations per workgroup of the engine's shaders (`local_size_x` in both).
-const ENGINE_WORKGROUP: u32 = 64;
+/// The engine's constants shared with its shaders (workgroup size, bindings):
+/// `glsl/examples/abi.rs`, which build.rs passes to them as `#define`s.
+mod abi {
+    include!(concat!(env!("CARGO_MANIFEST_DIR"), "/glsl/examples/abi.rs"));
+}
+use abi::*;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -132,6 +136,13 @@ impl CameraParams {
     }
 }
 
+/// Push constants of `shade.comp`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ShadeParams {
+    count: u32,
+}
+
 /// One entry of the engine's per-triangle surface buffer (`Surface` in `shade.comp`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -198,13 +209,26 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
     let pixel_buf = resources.buffer(u64::from(count) * 4, storage, MemoryLocation::GpuToCpu, "pixels")?;
 
     // The engine's pipelines and descriptor sets.
-    let raygen = resources.pipeline(shaders::EXAMPLE_RAYGEN, 1, std::mem::size_of::<CameraParams>() as u32)?;
-    let shade = resources.pipeline(shaders::EXAMPLE_SHADE, 4, 4)?;
+    let raygen = resources.pipeline(
+        shaders::EXAMPLE_RAYGEN,
+        ENGINE_RAYGEN_BINDINGS,
+        std::mem::size_of::<CameraParams>() as u32,
+    )?;
+    let shade =
+        resources.pipeline(shaders::EXAMPLE_SHADE, ENGINE_SHADE_BINDINGS, std::mem::size_of::<ShadeParams>() as u32)?;
     let [raygen_set, shade_set] = resources.descriptor_sets([raygen.set_layout, shade.set_layout])?;
     let pixels = BufferRange::new(pixel_buf, 0, u64::from(count) * 4);
     let surfaces_range = BufferRange::new(surface_buf, 0, surface_bytes.len() as u64);
-    resources.write_set(raygen_set, &[rays]);
-    resources.write_set(shade_set, &[rays, hits, surfaces_range, pixels]);
+    resources.write_set(raygen_set, &[(ENGINE_RAYGEN_BINDING_RAYS, rays)]);
+    resources.write_set(
+        shade_set,
+        &[
+            (ENGINE_SHADE_BINDING_RAYS, rays),
+            (ENGINE_SHADE_BINDING_HITS, hits),
+            (ENGINE_SHADE_BINDING_SURFACES, surfaces_range),
+            (ENGINE_SHADE_BINDING_PIXELS, pixels),
+        ],
+    );
 
     // One command buffer: raygen → barrier → kdtrace → barrier → shade → barrier → host.
     let device = &engine.device;
@@ -234,7 +258,14 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
         // kdtrace bound its own pipeline, set and push constants: bind ours again.
         device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::COMPUTE, shade.pipeline);
         device.cmd_bind_descriptor_sets(cmd, vk::PipelineBindPoint::COMPUTE, shade.layout, 0, &[shade_set], &[]);
-        device.cmd_push_constants(cmd, shade.layout, vk::ShaderStageFlags::COMPUTE, 0, &count.to_le_bytes());
+        let shade_params = ShadeParams { count };
+        device.cmd_push_constants(
+            cmd,
+            shade.layout,
+            vk::ShaderStageFlags::COMPUTE,
+            0,
+            bytemuck::bytes_of(&shade_params),
+        );
         device.cmd_dispatch(cmd, groups, 1, 1);
         let to_host = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)
@@ -679,18 +710,18 @@ impl<'a> Resources<'a> {
         }
     }
 
-    fn write_set(&self, set: vk::DescriptorSet, ranges: &[BufferRange]) {
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = ranges
+    /// Writes each `(binding, range)` into `set`.
+    fn write_set(&self, set: vk::DescriptorSet, ranges: &[(u32, BufferRange)]) {
+        let infos: Vec<(u32, [vk::DescriptorBufferInfo; 1])> = ranges
             .iter()
-            .map(|r| [vk::DescriptorBufferInfo { buffer: r.buffer, offset: r.offset, range: r.range }])
+            .map(|&(b, r)| (b, [vk::DescriptorBufferInfo { buffer: r.buffer, offset: r.offset, range: r.range }]))
             .collect();
         let writes: Vec<vk::WriteDescriptorSet> = infos
             .iter()
-            .enumerate()
-            .map(|(i, info)| {
+            .map(|(binding, info)| {
                 vk::WriteDescriptorSet::default()
                     .dst_set(set)
-                    .dst_binding(i as u32)
+                    .dst_binding(*binding)
                     .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
                     .buffer_info(info)
             })

@@ -9,15 +9,16 @@
 #include "ray.glsl"
 #include "render.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-// 0: pixel centres; 1: a jitter per pixel and sample; 2: one jitter per sample
-// for the whole image (what a rasterized first hit can follow).
-layout(constant_id = 0) const uint JITTER = 1u;
+// JITTER_NONE: pixel centres; JITTER_PER_PIXEL: a jitter per pixel and sample;
+// JITTER_PER_SAMPLE: one jitter per sample for the whole image (what a rasterized
+// first hit can follow). Values from src/render/consts.rs.
+layout(constant_id = RAYGEN_SPEC_JITTER) const uint JITTER = JITTER_PER_PIXEL;
 
-layout(std430, set = 0, binding = 0) readonly buffer Pixels { uint pixels[]; };
-layout(std430, set = 0, binding = 1) writeonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = 2) writeonly buffer Paths { Path paths[]; };
+layout(std430, set = 0, binding = RAYGEN_BINDING_PIXELS) readonly buffer Pixels { uint pixels[]; };
+layout(std430, set = 0, binding = RAYGEN_BINDING_RAYS) writeonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = RAYGEN_BINDING_PATHS) writeonly buffer Paths { Path paths[]; };
 
 layout(push_constant) uniform Params { RenderParams p; };
 
@@ -29,8 +30,8 @@ void main() {
     uint y = pixel / p.width;
     // Mode 2 takes the jitter the host computed for the rasterizer's projection
     // (right.w, up.w), so both use one value.
-    vec2 jitter = JITTER == 0u ? vec2(0.5)
-                : JITTER == 1u ? ld2(pixel, p.sample_index, 0u, p.seed)
+    vec2 jitter = JITTER == JITTER_NONE ? vec2(0.5)
+                : JITTER == JITTER_PER_PIXEL ? ld2(pixel, p.sample_index, 0u, p.seed)
                                : vec2(p.right.w, p.up.w);
     float sx = 2.0 * (float(x) + jitter.x) / float(p.width) - 1.0;
     float sy = 1.0 - 2.0 * (float(y) + jitter.y) / float(p.height);

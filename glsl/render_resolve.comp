@@ -9,14 +9,14 @@
 #include "ray.glsl"
 #include "render.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Paths { Path paths[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Spans { uvec2 spans[]; };
-layout(std430, set = 0, binding = 2) readonly buffer ShadowHits { Hit shadow_hits[]; };
-layout(std430, set = 0, binding = 3) readonly buffer ShadowWeights { vec4 shadow_weights[]; };
-layout(std430, set = 0, binding = 4) buffer Accum { vec4 accum[]; };
-layout(std430, set = 0, binding = 5) buffer Counters { uint counters[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_PATHS) readonly buffer Paths { Path paths[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_SPANS) readonly buffer Spans { uvec2 spans[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_SHADOW_HITS) readonly buffer ShadowHits { Hit shadow_hits[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_SHADOW_WEIGHTS) readonly buffer ShadowWeights { vec4 shadow_weights[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_ACCUM) buffer Accum { vec4 accum[]; };
+layout(std430, set = 0, binding = RESOLVE_BINDING_COUNTERS) buffer Counters { uint counters[]; };
 
 layout(push_constant) uniform Params { RenderParams p; };
 

@@ -14,32 +14,32 @@
 #include "ray.glsl"
 #include "render.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-layout(constant_id = 0) const bool HEADLIGHT = false;    // eye light, no shadow rays
-layout(constant_id = 1) const bool POINT_LIGHTS = true;  // --light
-layout(constant_id = 2) const bool AREA_LIGHTS = true;   // emissive triangles (Ke)
-layout(constant_id = 3) const bool MIRRORS = true;       // illum 3 materials
-layout(constant_id = 4) const bool GLOSSY = true;        // illum 2 highlights
-layout(constant_id = 5) const bool AO = true;            // --ao N
-layout(constant_id = 6) const bool BOUNCES = true;       // --bounces N
-layout(constant_id = 7) const bool CONTINUE = true;      // a next queue exists
-layout(constant_id = 8) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
+layout(constant_id = SHADE_SPEC_HEADLIGHT) const bool HEADLIGHT = false;    // eye light, no shadow rays
+layout(constant_id = SHADE_SPEC_POINT_LIGHTS) const bool POINT_LIGHTS = true;  // --light
+layout(constant_id = SHADE_SPEC_AREA_LIGHTS) const bool AREA_LIGHTS = true;   // emissive triangles (Ke)
+layout(constant_id = SHADE_SPEC_MIRRORS) const bool MIRRORS = true;       // illum 3 materials
+layout(constant_id = SHADE_SPEC_GLOSSY) const bool GLOSSY = true;        // illum 2 highlights
+layout(constant_id = SHADE_SPEC_AO) const bool AO = true;            // --ao N
+layout(constant_id = SHADE_SPEC_BOUNCES) const bool BOUNCES = true;       // --bounces N
+layout(constant_id = SHADE_SPEC_CONTINUE) const bool CONTINUE = true;      // a next queue exists
+layout(constant_id = SHADE_SPEC_HEADLIGHT_SHADOWS) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
 
-layout(std430, set = 0, binding = 0) readonly buffer Surfaces { Surface surfaces[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Materials { Material materials[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Emitters { Emitter emitters[]; };
-layout(std430, set = 0, binding = 3) readonly buffer Lights { PointLight lights[]; };
-layout(std430, set = 0, binding = 4) readonly buffer RaysIn { Ray rays_in[]; };
-layout(std430, set = 0, binding = 5) readonly buffer PathsIn { Path paths_in[]; };
-layout(std430, set = 0, binding = 6) readonly buffer HitsIn { Hit hits_in[]; };
-layout(std430, set = 0, binding = 7) writeonly buffer RaysNext { Ray rays_next[]; };
-layout(std430, set = 0, binding = 8) writeonly buffer PathsNext { Path paths_next[]; };
-layout(std430, set = 0, binding = 9) writeonly buffer ShadowRays { Ray shadow_rays[]; };
-layout(std430, set = 0, binding = 10) writeonly buffer ShadowWeights { vec4 shadow_weights[]; };
-layout(std430, set = 0, binding = 11) writeonly buffer Spans { uvec2 spans[]; };
-layout(std430, set = 0, binding = 12) buffer Counters { uint counters[]; };
-layout(std430, set = 0, binding = 13) buffer Accum { vec4 accum[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_MATERIALS) readonly buffer Materials { Material materials[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_EMITTERS) readonly buffer Emitters { Emitter emitters[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_LIGHTS) readonly buffer Lights { PointLight lights[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_RAYS_IN) readonly buffer RaysIn { Ray rays_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_PATHS_IN) readonly buffer PathsIn { Path paths_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_HITS_IN) readonly buffer HitsIn { Hit hits_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_RAYS_NEXT) writeonly buffer RaysNext { Ray rays_next[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_PATHS_NEXT) writeonly buffer PathsNext { Path paths_next[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_SHADOW_RAYS) writeonly buffer ShadowRays { Ray shadow_rays[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_SHADOW_WEIGHTS) writeonly buffer ShadowWeights { vec4 shadow_weights[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_SPANS) writeonly buffer Spans { uvec2 spans[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_COUNTERS) buffer Counters { uint counters[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_ACCUM) buffer Accum { vec4 accum[]; };
 
 layout(push_constant) uniform Params { RenderParams p; };
 

@@ -13,19 +13,19 @@
 #include "ray.glsl"
 #include "render.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
 
-layout(constant_id = 0) const bool ROBUST = true;
+layout(constant_id = VISIBILITY_SPEC_ROBUST) const bool ROBUST = true;
 const bool SEGMENT_FRAME = false;  // camera rays are never moved (see trace.comp)
 
 #include "triangle.glsl"
 
-layout(std430, set = 0, binding = 0) readonly buffer Pixels { uint pixels[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Visibility { uint visibility[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Surfaces { Surface surfaces[]; };
-layout(std430, set = 0, binding = 3) readonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = 4) writeonly buffer Hits { Hit hits[]; };
-layout(std430, set = 0, binding = 5) buffer Counters { uint counters[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_PIXELS) readonly buffer Pixels { uint pixels[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_VISIBILITY) readonly buffer Visibility { uint visibility[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
+layout(std430, set = 0, binding = VISIBILITY_BINDING_COUNTERS) buffer Counters { uint counters[]; };
 
 layout(push_constant) uniform Params { RenderParams p; };
 

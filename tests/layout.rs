@@ -1,6 +1,7 @@
 //! Proves that the Rust mirrors of the shared GLSL structs agree with the shader's
 //! view of them: sizes and offsets on the Rust side, field by field on the GPU
-//! side (glsl/layout_probe.comp reads each struct and writes its fields back).
+//! side (glsl/layout_probe.comp reads each struct of the tracer and writes its
+//! fields back; glsl/render_layout_probe.comp those of the renderer).
 
 mod common;
 
@@ -108,5 +109,77 @@ fn gpu_reads_every_field_where_rust_wrote_it() {
     assert_eq!((nodes[1].axis(), nodes[1].split(), nodes[1].above_child()), (2, -17.5, 98_765));
     assert_eq!((nodes[2].prim_count(), nodes[2].prim_offset()), (77, 4321));
     drop((set, kernel, ray_buf, hit_buf, node_buf, out));
+    assert_validation_clean(&ctx);
+}
+
+/// The renderer's structs (`glsl/shared/render.glsl`): glsl/render_layout_probe.comp
+/// writes back the `RenderParams` push constants and element 1 of each scene and
+/// queue struct field by field in declaration order. `RenderParams` is filled
+/// through its Rust fields; the others (private to the renderer, their sizes and
+/// repr(C) field order tested in src/render/abi.rs) with distinct raw words, so
+/// every field must come back from where the Rust mirror puts it.
+#[test]
+fn gpu_reads_every_render_field_where_rust_wrote_it() {
+    use kdtrace::render::RenderParams;
+    let ctx = context();
+    let params = RenderParams {
+        eye: [1.0, 2.0, 3.0, 4.0],
+        forward: [5.0, 6.0, 7.0, 8.0],
+        right: [9.0, 10.0, 11.0, 12.0],
+        up: [13.0, 14.0, 15.0, 16.0],
+        background: [17.0, 18.0, 19.0, 20.0],
+        width: 21,
+        height: 22,
+        count: 23,
+        sample_index: 24,
+        seed: 25,
+        max_depth: 26,
+        bounces: 27,
+        ao_samples: 28,
+        ao_radius: 29.5,
+        light_count: 30,
+        emitter_count: 31,
+        shadow_capacity: 32,
+    };
+    // Words per element of Surface, Material, Emitter, PointLight, Path.
+    let words_per = [12usize, 12, 4, 8, 8];
+    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let mut expected: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&params)).to_vec();
+    let mut buffers = Vec::new();
+    for (i, &n) in words_per.iter().enumerate() {
+        // Element 0 zero, element 1 distinct words (so the stride counts too).
+        let element: Vec<u32> = (0..n as u32).map(|w| 0x1000 * (i as u32 + 1) + w).collect();
+        let data: Vec<u32> = std::iter::repeat_n(0, n).chain(element.iter().copied()).collect();
+        expected.extend(&element);
+        buffers.push(Buffer::with_data(&ctx, bytemuck::cast_slice(&data), usage, "render struct").unwrap());
+    }
+    let out = Buffer::new(&ctx, 4 * expected.len() as u64, usage, MemoryLocation::GpuToCpu, "words").unwrap();
+    let kernel = Kernel::new(
+        &ctx,
+        &KernelDesc {
+            name: "render_layout_probe",
+            spirv: shaders::RENDER_LAYOUT_PROBE,
+            bindings: 6,
+            push_constant_size: size_of::<RenderParams>() as u32,
+            workgroup_size: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut bound: Vec<&Buffer> = buffers.iter().collect();
+    bound.push(&out);
+    let set = BufferSet::new(&ctx, &kernel, &bound).unwrap();
+    ctx.submit_and_wait(|cmd| {
+        // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
+        unsafe {
+            kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), 1);
+            ctx.record_host_read_barrier(cmd);
+        }
+    })
+    .unwrap();
+    let words: &[u32] = bytemuck::cast_slice(out.read(0, 4 * expected.len()).unwrap());
+    assert_eq!(words, &expected[..]);
+    drop((set, kernel, bound));
+    drop((buffers, out));
     assert_validation_clean(&ctx);
 }

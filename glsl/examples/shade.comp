@@ -1,13 +1,14 @@
 #version 450
 // examples/embed.rs, pass 3: the engine's own shading of kdtrace's hits. A light
 // at the eye on each triangle's diffuse colour (as `kdtrace render` shades),
-// written as sRGB RGBA8 pixels. Compiled against kdtrace.glsl alone.
+// written as sRGB RGBA8 pixels. Compiled against kdtrace.glsl alone, with the
+// engine's own ENGINE_* #defines (glsl/examples/abi.rs).
 
 #extension GL_GOOGLE_include_directive : require
 
 #include "kdtrace.glsl"
 
-layout(local_size_x = 64) in;
+layout(local_size_x = ENGINE_WORKGROUP) in;
 
 // The engine's per-triangle surface data, indexed by prim_id.
 struct Surface {
@@ -16,10 +17,10 @@ struct Surface {
     vec4 emission;  // rgb, clamped to 1
 };
 
-layout(std430, set = 0, binding = 0) readonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = 1) readonly buffer Hits { Hit hits[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Surfaces { Surface surfaces[]; };
-layout(std430, set = 0, binding = 3) writeonly buffer Pixels { uint pixels[]; };
+layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
+layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_HITS) readonly buffer Hits { Hit hits[]; };
+layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
+layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_PIXELS) writeonly buffer Pixels { uint pixels[]; };
 
 layout(push_constant) uniform ShadeParams {
     uint count;

@@ -1,4 +1,4 @@
-// The renderer's wavefront data (std430), mirrored by src/render/wavefront.rs:
+// The renderer's wavefront data (std430), mirrored by src/render/abi.rs:
 // per-path state, per-triangle surfaces, materials, lights, the push constants,
 // and the helpers every render pass shares (sampling, robust ray offsets).
 #ifndef RENDER_GLSL
@@ -26,11 +26,7 @@ struct Surface {
     vec4 v2;
 };
 
-// Material flags (in Material.ks.w).
-#define MAT_DIFFUSE 1u    // Kd > 0
-#define MAT_GLOSSY 2u     // illum 2 with Ks > 0: a normalized Phong lobe for direct light
-#define MAT_MIRROR 4u     // illum 3 with Ks > 0: perfect reflection weighted by Ks
-#define MAT_EMISSIVE 8u   // Ke > 0
+// Material flags (MAT_* in Material.ks.w): #defines from src/render/consts.rs.
 
 struct Material {
     vec4 kd;   // xyz Kd, w Ns
@@ -52,7 +48,7 @@ struct PointLight {
     vec4 intensity;   // xyz: radiant intensity (W/sr per channel)
 };
 
-// Push constants of every render pass (96 bytes).
+// Push constants of every render pass (128 bytes; RenderParams of src/render/abi.rs).
 struct RenderParams {
     vec4 eye;          // camera: xyz eye
     vec4 forward;      // xyz forward (unit); w: total emitter weight (sum of area x luminance of Ke)
@@ -73,13 +69,9 @@ struct RenderParams {
     uint shadow_capacity;   // shadow rays the queue holds
 };
 
-// The render counters buffer (uint each).
-#define RC_NEXT 0u        // paths appended to the next queue
-#define RC_SHADOW 1u      // shadow rays appended
-#define RC_BAD_RAYS 2u    // rays the tracer reported invalid or incomplete
-#define RC_OVERFLOW 3u    // shadow rays dropped for want of queue space (a bug if not 0)
-#define RC_RASTER_EDGE 4u // rasterized first hits the ray test put just outside their triangle
-#define RC_COUNT 5u
+// The render counters buffer (uint each) is indexed by RC_*, the kernels'
+// bindings are *_BINDING_*, their workgroup size RENDER_WORKGROUP_SIZE: all
+// #defines from src/render/consts.rs (build.rs).
 
 // --- Sampling ---------------------------------------------------------------
 

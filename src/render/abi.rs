@@ -1,28 +1,26 @@
 //! The renderer's side of its contract with `glsl/shared/render.glsl`: the push
-//! constants, the std430 structs of the scene buffers, the material flags, the
-//! counter indices and the ray generation's jitter modes. Each mirrors a
-//! declaration there; the sizes are tested below.
+//! constants and the std430 structs of the scene buffers. Each mirrors a
+//! declaration there; the sizes are tested below. The constants (material
+//! flags, counter indices, jitter modes, bindings) are in `consts.rs`, which
+//! build.rs passes to the kernels as `#define`s.
 
 use bytemuck::{Pod, Zeroable};
 
-/// Material flags, as `render.glsl`'s `MAT_*`.
-pub(super) const MAT_DIFFUSE: u32 = 1;
-pub(super) const MAT_GLOSSY: u32 = 2;
-pub(super) const MAT_MIRROR: u32 = 4;
-pub(super) const MAT_EMISSIVE: u32 = 8;
+use crate::geom::{Hit, Ray};
 
-/// Indices of the render counters (`RC_*` in `render.glsl`).
-pub(super) const RC_NEXT: usize = 0;
-pub(super) const RC_SHADOW: usize = 1;
-pub(super) const RC_BAD_RAYS: usize = 2;
-pub(super) const RC_OVERFLOW: usize = 3;
-pub(super) const RC_RASTER_EDGE: usize = 4;
-pub(super) const RC_COUNT: usize = 5;
-
-/// Jitter modes of `render_raygen.comp` (its specialization constant 0).
-pub(super) const JITTER_NONE: u32 = 0;
-pub(super) const JITTER_PER_PIXEL: u32 = 1;
-pub(super) const JITTER_PER_SAMPLE: u32 = 2;
+/// Bytes of a ray of a queue (std430 `Ray`).
+pub(super) const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
+/// Bytes of a hit of a queue (std430 `Hit`).
+pub(super) const HIT_BYTES: u64 = std::mem::size_of::<Hit>() as u64;
+/// Bytes of a path of a queue (`Path` of `render.glsl`, [`GpuPath`]); the shadow
+/// queue keeps each shadow ray's `vec4` weight in such a slot.
+pub(super) const PATH_BYTES: u64 = std::mem::size_of::<GpuPath>() as u64;
+/// Bytes per pixel of the accumulation buffer (a `vec4`: radiance sum, bad rays).
+pub(super) const ACCUM_BYTES: u64 = std::mem::size_of::<[f32; 4]>() as u64;
+/// Bytes per path of the shadow spans (a `uvec2`).
+pub(super) const SPAN_BYTES: u64 = std::mem::size_of::<[u32; 2]>() as u64;
+/// Bytes of a render counter (`uint`).
+pub(super) const COUNTER_BYTES: u64 = std::mem::size_of::<u32>() as u64;
 
 /// Push constants of the render passes (`RenderParams` in `render.glsl`), 128 bytes.
 #[repr(C)]
@@ -63,6 +61,31 @@ pub struct RenderParams {
     pub emitter_count: u32,
     /// Shadow rays the shadow queue holds.
     pub shadow_capacity: u32,
+}
+
+/// The entries of a descriptor set (buffers in binding order) or of a kernel's
+/// specialization constants (values in id order), from `(binding or id, entry)`
+/// pairs in any order; each of `0..N` exactly once.
+pub(super) fn in_order<T: Copy, const N: usize>(entries: [(u32, T); N]) -> [T; N] {
+    let mut out: [Option<T>; N] = [None; N];
+    for (index, entry) in entries {
+        let slot = &mut out[index as usize];
+        assert!(slot.replace(entry).is_none(), "binding or id {index} given twice");
+    }
+    out.map(|e| e.expect("every binding or id given"))
+}
+
+/// `Path` of `render.glsl`: written and read by the kernels only, mirrored for its size.
+#[allow(dead_code)]
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct GpuPath {
+    pub(super) throughput: [f32; 3],
+    pub(super) pixel: u32,
+    pub(super) flags: u32,
+    pub(super) depth: u32,
+    pub(super) diffuse: u32,
+    pub(super) pad: u32,
 }
 
 /// `Surface` of `render.glsl`: the vertices, the material id's bits in `v0.w`.
@@ -106,9 +129,32 @@ mod tests {
     #[test]
     fn push_constants_fit_the_guaranteed_128_bytes() {
         assert_eq!(std::mem::size_of::<RenderParams>(), 128);
+        assert_eq!(std::mem::size_of::<GpuPath>(), 32);
         assert_eq!(std::mem::size_of::<Surface>(), 48);
         assert_eq!(std::mem::size_of::<GpuMaterial>(), 48);
         assert_eq!(std::mem::size_of::<Emitter>(), 16);
         assert_eq!(std::mem::size_of::<GpuLight>(), 32);
+        // Field order as declared in render.glsl (tests/layout.rs checks the shaders' side).
+        use std::mem::offset_of;
+        assert_eq!(
+            [offset_of!(GpuMaterial, kd_ns), offset_of!(GpuMaterial, ks_flags), offset_of!(GpuMaterial, ke)],
+            [0, 16, 32]
+        );
+        assert_eq!(
+            [offset_of!(Emitter, prim), offset_of!(Emitter, cdf), offset_of!(Emitter, pick), offset_of!(Emitter, area)],
+            [0, 4, 8, 12]
+        );
+        assert_eq!([offset_of!(GpuLight, position), offset_of!(GpuLight, intensity)], [0, 16]);
+        assert_eq!(
+            [
+                offset_of!(GpuPath, throughput),
+                offset_of!(GpuPath, pixel),
+                offset_of!(GpuPath, flags),
+                offset_of!(GpuPath, depth),
+                offset_of!(GpuPath, diffuse),
+                offset_of!(GpuPath, pad)
+            ],
+            [0, 12, 16, 20, 24, 28]
+        );
     }
 }

@@ -3,6 +3,7 @@
 //! tone mapping and image output (PNG, linear EXR), and cost heatmaps.
 
 mod abi;
+mod consts;
 mod output;
 mod passes;
 mod plan;

@@ -74,7 +74,7 @@ pub struct RenderOutput {
 /// mean of `samples` samples' radiance, and the pixels that had a bad ray (the
 /// shade and resolve kernels count a pixel's bad rays in its sum's w).
 pub(super) fn read_image(readback: &Buffer, pixel_count: u64, samples: u32) -> Result<(Vec<Vec3>, Vec<usize>)> {
-    let sums: &[[f32; 4]] = bytemuck::cast_slice(readback.read(0, (pixel_count * 16) as usize)?);
+    let sums: &[[f32; 4]] = bytemuck::cast_slice(readback.read(0, (pixel_count * super::abi::ACCUM_BYTES) as usize)?);
     let scale = 1.0 / samples as f32;
     let pixels = sums.iter().map(|s| Vec3::new(s[0], s[1], s[2]) * scale).collect();
     let bad_pixels = sums.iter().enumerate().filter(|(_, s)| s[3] > 0.0).map(|(i, _)| i).collect();

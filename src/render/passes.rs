@@ -4,7 +4,8 @@
 
 use ash::vk;
 
-use super::abi::{RenderParams, RC_BAD_RAYS, RC_COUNT, RC_NEXT, RC_OVERFLOW, RC_RASTER_EDGE, RC_SHADOW};
+use super::abi::{RenderParams, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES};
+use super::consts::{RC_BAD_RAYS, RC_COUNT, RC_NEXT, RC_OVERFLOW, RC_RASTER_EDGE, RC_SHADOW};
 use super::output::RenderStats;
 use super::resources::{RasterPass, Resources};
 use crate::error::{Error, Result};
@@ -120,14 +121,15 @@ unsafe fn compute_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
     );
 }
 
-fn read_counters(counters: &Buffer) -> Result<[u32; RC_COUNT]> {
-    let bytes = counters.read(0, RC_COUNT * 4)?;
-    let mut out = [0u32; RC_COUNT];
-    for (o, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
-        *o = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-    }
-    debug_assert_eq!([RC_NEXT, RC_SHADOW, RC_BAD_RAYS, RC_OVERFLOW, RC_RASTER_EDGE], [0, 1, 2, 3, 4]);
-    Ok(out)
+/// The render counters, `RC_*` each: next paths, shadow rays, bad rays, shadow
+/// overflow, raster edge pixels.
+fn read_counters(counters: &Buffer) -> Result<[u32; RC_COUNT as usize]> {
+    let bytes = counters.read(0, (u64::from(RC_COUNT) * COUNTER_BYTES) as usize)?;
+    let counter = |index: u32| {
+        let b = &bytes[(u64::from(index) * COUNTER_BYTES) as usize..][..4];
+        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+    };
+    Ok([RC_NEXT, RC_SHADOW, RC_BAD_RAYS, RC_OVERFLOW, RC_RASTER_EDGE].map(counter))
 }
 
 /// The sample loop's state: what the passes record with and what they update.
@@ -196,7 +198,8 @@ impl Frame<'_> {
                     )
                 });
                 if let (Some(readback), 0) = (&res.hit_readback, sample) {
-                    let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: u64::from(chunk_pixels) * 16 }];
+                    let region =
+                        [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: u64::from(chunk_pixels) * HIT_BYTES }];
                     device.cmd_copy_buffer(cmd, res.queues.a.hits.buffer, readback.buffer, &region);
                 }
                 pass.end(cmd);
@@ -206,7 +209,7 @@ impl Frame<'_> {
         self.stats.submits += 1;
         self.stats.camera_rays += u64::from(chunk_pixels);
         if let (Some(readback), Some(first), 0) = (&res.hit_readback, &mut self.first_hits, sample) {
-            let hits: &[Hit] = bytemuck::cast_slice(readback.read(0, chunk_pixels as usize * 16)?);
+            let hits: &[Hit] = bytemuck::cast_slice(readback.read(0, (u64::from(chunk_pixels) * HIT_BYTES) as usize)?);
             for (i, hit) in hits.iter().enumerate() {
                 first[res.data.order[first_pixel as usize + i] as usize] = *hit;
             }
@@ -279,7 +282,7 @@ impl Frame<'_> {
     /// Copies the accumulation buffer to its host-visible readback and waits.
     pub(super) fn copy_image(&self) -> Result<()> {
         let (ctx, q) = (self.ctx, &self.res.queues);
-        let size = self.res.sizes.pixel_count * 16;
+        let size = self.res.sizes.pixel_count * ACCUM_BYTES;
         // SAFETY: as in `camera_wave`.
         unsafe {
             ctx.submit_and_wait(|cmd| {

@@ -3,7 +3,12 @@
 
 use glam::Vec3;
 
-use super::abi::{Emitter, MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR};
+use super::abi::{in_order, Emitter};
+use super::consts::{
+    MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR, SHADE_SPECS, SHADE_SPEC_AO, SHADE_SPEC_AREA_LIGHTS,
+    SHADE_SPEC_BOUNCES, SHADE_SPEC_CONTINUE, SHADE_SPEC_GLOSSY, SHADE_SPEC_HEADLIGHT, SHADE_SPEC_HEADLIGHT_SHADOWS,
+    SHADE_SPEC_MIRRORS, SHADE_SPEC_POINT_LIGHTS,
+};
 use super::settings::{Primary, RenderSettings};
 use crate::error::Result;
 use crate::scene::Scene;
@@ -222,19 +227,19 @@ impl RenderPlan {
         &self.explain
     }
 
-    /// The shade pass's specialization constants (ids 0..=8 of `render_shade.comp`).
-    pub(super) fn shade_constants(&self) -> [u32; 9] {
-        [
-            self.headlight,
-            self.point_lights,
-            self.area_lights,
-            self.mirrors,
-            self.glossy,
-            self.ao,
-            self.bounces,
-            self.continue_paths,
-            self.headlight_shadows,
-        ]
+    /// The shade pass's specialization constants (`SHADE_SPEC_*` of `render_shade.comp`), in id order.
+    pub(super) fn shade_constants(&self) -> [u32; SHADE_SPECS as usize] {
+        in_order([
+            (SHADE_SPEC_HEADLIGHT, self.headlight),
+            (SHADE_SPEC_POINT_LIGHTS, self.point_lights),
+            (SHADE_SPEC_AREA_LIGHTS, self.area_lights),
+            (SHADE_SPEC_MIRRORS, self.mirrors),
+            (SHADE_SPEC_GLOSSY, self.glossy),
+            (SHADE_SPEC_AO, self.ao),
+            (SHADE_SPEC_BOUNCES, self.bounces),
+            (SHADE_SPEC_CONTINUE, self.continue_paths),
+            (SHADE_SPEC_HEADLIGHT_SHADOWS, self.headlight_shadows),
+        ])
         .map(u32::from)
     }
 }

@@ -7,7 +7,11 @@ use ash::vk;
 use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
-use super::abi::{GpuLight, GpuMaterial, Surface, JITTER_NONE, JITTER_PER_PIXEL, JITTER_PER_SAMPLE, RC_COUNT};
+use super::abi::{
+    in_order, GpuLight, GpuMaterial, RenderParams, Surface, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, PATH_BYTES,
+    RAY_BYTES, SPAN_BYTES,
+};
+use super::consts::*;
 use super::passes::TIMESTAMP_PAIRS;
 use super::plan::{material_flags, RenderPlan};
 use super::settings::RenderSettings;
@@ -18,6 +22,9 @@ use crate::scene::Scene;
 use crate::trace::{TraceBinding, TraceOptions, Tracer};
 
 type Ctx = std::sync::Arc<GpuContext>;
+
+/// Bytes of push constants of every render kernel: one [`RenderParams`].
+const PUSH_CONSTANT_SIZE: u32 = std::mem::size_of::<RenderParams>() as u32;
 
 /// Bytes of device memory the shadow queue may take (rays, weights, hits).
 const SHADOW_QUEUE_BYTES: u64 = 256 << 20;
@@ -36,7 +43,7 @@ impl Queue {
         let make = |bytes: u64, what: &str| {
             Buffer::new(ctx, capacity * bytes, usage, MemoryLocation::GpuOnly, &format!("{name} {what}"))
         };
-        Ok(Queue { rays: make(32, "rays")?, paths: make(32, "paths")?, hits: make(16, "hits")? })
+        Ok(Queue { rays: make(RAY_BYTES, "rays")?, paths: make(PATH_BYTES, "paths")?, hits: make(HIT_BYTES, "hits")? })
     }
 }
 
@@ -58,10 +65,10 @@ impl Chunking {
         let (width, height) = (settings.width, settings.height);
         let pixel_count = u64::from(width) * u64::from(height);
         let limit = ctx.info.max_storage_buffer_range;
-        if pixel_count * 16 > limit || pixel_count * 16 > ctx.info.max_memory_allocation_size {
+        if pixel_count * ACCUM_BYTES > limit || pixel_count * ACCUM_BYTES > ctx.info.max_memory_allocation_size {
             return Err(Error::DeviceLimit(format!(
                 "a {width}x{height} image needs {} bytes of accumulation buffer; the device allows {limit} per storage buffer",
-                pixel_count * 16
+                pixel_count * ACCUM_BYTES
             )));
         }
         let shadow_per_path = u64::from(plan.shadow_per_vertex);
@@ -89,14 +96,17 @@ impl Kernels {
             &KernelDesc {
                 name: "render_raygen",
                 spirv: shaders::RENDER_RAYGEN,
-                bindings: 3,
-                push_constant_size: 128,
-                spec_constants: &[match (plan.jitter, plan.raster) {
-                    (false, _) => JITTER_NONE,
-                    (true, false) => JITTER_PER_PIXEL,
-                    (true, true) => JITTER_PER_SAMPLE,
-                }],
-                workgroup_size: 64,
+                bindings: RAYGEN_BINDINGS,
+                push_constant_size: PUSH_CONSTANT_SIZE,
+                spec_constants: &in_order::<_, { RAYGEN_SPECS as usize }>([(
+                    RAYGEN_SPEC_JITTER,
+                    match (plan.jitter, plan.raster) {
+                        (false, _) => JITTER_NONE,
+                        (true, false) => JITTER_PER_PIXEL,
+                        (true, true) => JITTER_PER_SAMPLE,
+                    },
+                )]),
+                workgroup_size: RENDER_WORKGROUP_SIZE,
                 ..Default::default()
             },
         )?;
@@ -106,10 +116,10 @@ impl Kernels {
             &KernelDesc {
                 name: "render_shade",
                 spirv: shaders::RENDER_SHADE,
-                bindings: 14,
-                push_constant_size: 128,
+                bindings: SHADE_BINDINGS,
+                push_constant_size: PUSH_CONSTANT_SIZE,
                 spec_constants: &shade_constants,
-                workgroup_size: 64,
+                workgroup_size: RENDER_WORKGROUP_SIZE,
                 ..Default::default()
             },
         )?;
@@ -119,9 +129,9 @@ impl Kernels {
                 &KernelDesc {
                     name: "render_resolve",
                     spirv: shaders::RENDER_RESOLVE,
-                    bindings: 6,
-                    push_constant_size: 128,
-                    workgroup_size: 64,
+                    bindings: RESOLVE_BINDINGS,
+                    push_constant_size: PUSH_CONSTANT_SIZE,
+                    workgroup_size: RENDER_WORKGROUP_SIZE,
                     ..Default::default()
                 },
             )?),
@@ -225,24 +235,29 @@ impl Queues {
         let Chunking { pixel_count, chunk, shadow_capacity } = sizes;
         let a = Queue::new(ctx, chunk, "queue A")?;
         let b = if plan.continue_paths { Some(Queue::new(ctx, chunk, "queue B")?) } else { None };
-        let spans = Buffer::new(ctx, chunk * 8, storage, MemoryLocation::GpuOnly, "shadow spans")?;
+        let spans = Buffer::new(ctx, chunk * SPAN_BYTES, storage, MemoryLocation::GpuOnly, "shadow spans")?;
         let shadow = if plan.shadow_pass { Some(Queue::new(ctx, shadow_capacity, "shadow")?) } else { None };
         let counters = Buffer::new(
             ctx,
-            RC_COUNT as u64 * 4,
+            u64::from(RC_COUNT) * COUNTER_BYTES,
             storage | vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
             "render counters",
         )?;
         let accum = Buffer::new(
             ctx,
-            pixel_count * 16,
+            pixel_count * ACCUM_BYTES,
             storage | vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::TRANSFER_SRC,
             MemoryLocation::GpuOnly,
             "accumulation",
         )?;
-        let readback =
-            Buffer::new(ctx, pixel_count * 16, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu, "image")?;
+        let readback = Buffer::new(
+            ctx,
+            pixel_count * ACCUM_BYTES,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+            "image",
+        )?;
         let dummy = unused(ctx)?;
         Ok(Queues { a, b, spans, shadow, counters, accum, readback, dummy })
     }
@@ -268,34 +283,53 @@ impl Sets {
             Some(s) => (&s.rays, &s.paths, &s.hits),
             None => (&q.dummy, &q.dummy, &q.dummy),
         };
-        let raygen = BufferSet::new(ctx, &kernels.raygen, &[&data.pixels, &q.a.rays, &q.a.paths])?;
+        let raygen = BufferSet::new(
+            ctx,
+            &kernels.raygen,
+            &in_order::<_, { RAYGEN_BINDINGS as usize }>([
+                (RAYGEN_BINDING_PIXELS, &data.pixels),
+                (RAYGEN_BINDING_RAYS, &q.a.rays),
+                (RAYGEN_BINDING_PATHS, &q.a.paths),
+            ]),
+        )?;
         let shade_set = |from: &Queue, to: &Queue| {
             BufferSet::new(
                 ctx,
                 &kernels.shade,
-                &[
-                    &data.surfaces,
-                    &data.materials,
-                    &data.emitters,
-                    &data.lights,
-                    &from.rays,
-                    &from.paths,
-                    &from.hits,
-                    &to.rays,
-                    &to.paths,
-                    shadow_rays,
-                    shadow_weights,
-                    &q.spans,
-                    &q.counters,
-                    &q.accum,
-                ],
+                &in_order::<_, { SHADE_BINDINGS as usize }>([
+                    (SHADE_BINDING_SURFACES, &data.surfaces),
+                    (SHADE_BINDING_MATERIALS, &data.materials),
+                    (SHADE_BINDING_EMITTERS, &data.emitters),
+                    (SHADE_BINDING_LIGHTS, &data.lights),
+                    (SHADE_BINDING_RAYS_IN, &from.rays),
+                    (SHADE_BINDING_PATHS_IN, &from.paths),
+                    (SHADE_BINDING_HITS_IN, &from.hits),
+                    (SHADE_BINDING_RAYS_NEXT, &to.rays),
+                    (SHADE_BINDING_PATHS_NEXT, &to.paths),
+                    (SHADE_BINDING_SHADOW_RAYS, shadow_rays),
+                    (SHADE_BINDING_SHADOW_WEIGHTS, shadow_weights),
+                    (SHADE_BINDING_SPANS, &q.spans),
+                    (SHADE_BINDING_COUNTERS, &q.counters),
+                    (SHADE_BINDING_ACCUM, &q.accum),
+                ]),
             )
         };
         let shade = [shade_set(&q.a, b_or_a)?, shade_set(b_or_a, &q.a)?];
         let resolve = match &kernels.resolve {
             Some(k) => {
                 let set = |p: &Queue| {
-                    BufferSet::new(ctx, k, &[&p.paths, &q.spans, shadow_hits, shadow_weights, &q.accum, &q.counters])
+                    BufferSet::new(
+                        ctx,
+                        k,
+                        &in_order::<_, { RESOLVE_BINDINGS as usize }>([
+                            (RESOLVE_BINDING_PATHS, &p.paths),
+                            (RESOLVE_BINDING_SPANS, &q.spans),
+                            (RESOLVE_BINDING_SHADOW_HITS, shadow_hits),
+                            (RESOLVE_BINDING_SHADOW_WEIGHTS, shadow_weights),
+                            (RESOLVE_BINDING_ACCUM, &q.accum),
+                            (RESOLVE_BINDING_COUNTERS, &q.counters),
+                        ]),
+                    )
                 };
                 Some([set(&q.a)?, set(b_or_a)?])
             }
@@ -329,17 +363,27 @@ impl RasterPass {
             &KernelDesc {
                 name: "render_visibility",
                 spirv: shaders::RENDER_VISIBILITY,
-                bindings: 6,
-                push_constant_size: 128,
-                spec_constants: &[u32::from(settings.traversal.robust)],
-                workgroup_size: 64,
+                bindings: VISIBILITY_BINDINGS,
+                push_constant_size: PUSH_CONSTANT_SIZE,
+                spec_constants: &in_order::<_, { VISIBILITY_SPECS as usize }>([(
+                    VISIBILITY_SPEC_ROBUST,
+                    u32::from(settings.traversal.robust),
+                )]),
+                workgroup_size: RENDER_WORKGROUP_SIZE,
                 ..Default::default()
             },
         )?;
         let set = BufferSet::new(
             ctx,
             &kernel,
-            &[&data.pixels, &visibility, &data.surfaces, &q.a.rays, &q.a.hits, &q.counters],
+            &in_order::<_, { VISIBILITY_BINDINGS as usize }>([
+                (VISIBILITY_BINDING_PIXELS, &data.pixels),
+                (VISIBILITY_BINDING_VISIBILITY, &visibility),
+                (VISIBILITY_BINDING_SURFACES, &data.surfaces),
+                (VISIBILITY_BINDING_RAYS, &q.a.rays),
+                (VISIBILITY_BINDING_HITS, &q.a.hits),
+                (VISIBILITY_BINDING_COUNTERS, &q.counters),
+            ]),
         )?;
         Ok(RasterPass { rasterizer, visibility, kernel, set })
     }
@@ -414,7 +458,7 @@ impl Resources {
         let hit_readback = match settings.keep_first_hits {
             true => Some(Buffer::new(
                 &ctx,
-                sizes.chunk * 16,
+                sizes.chunk * HIT_BYTES,
                 vk::BufferUsageFlags::TRANSFER_DST,
                 MemoryLocation::GpuToCpu,
                 "first hits",
