@@ -34,13 +34,15 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
         uvec2 n = fetch_node(node, c);
         ++step;
         // An empty leaf that does not end the traversal, with an entry to pop, is
-        // left inside the descent (as in stack.glsl); restarts go through the
-        // leaf visit below.
+        // left inside the descent (as in stack.glsl, which says why the pop below is
+        // written twice); restarts go through the leaf visit below.
         if (descends(n, t1, best) && (!node_is_leaf(n) || (count > 0u && !k.seeking))) do {
             uint near, far;
             float ts;
-            uint visit = VISIT_NEAR;
+            uint visit = node_is_leaf(n) ? VISIT_NEAR : decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
             if (node_is_leaf(n)) {
+                // The pop after a leaf (below). push_down is false here: an entry
+                // to pop means a push since the last restart.
                 c.leaves += 1u;
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
@@ -48,11 +50,6 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 t0 = stack_t0[head];
                 t1 = stack_t1[head];
                 t1_plane = stack_plane[head];
-            } else {
-                visit = decide_children(r, node, n, t0, t1, exit_plane, near, far, ts);
-            }
-            if (node_is_leaf(n)) {
-                // popped above
             } else if (ROBUST && k.seeking) {
                 node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best_reach(best));
                 if (!k.seeking) {

@@ -67,6 +67,9 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
                 --sp;
             } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
         }
+        // A second pop site, on purpose: leaving visited leaves through the
+        // descent's pop (one site) cost 3.6-4.4 % more instructions on lavapipe
+        // (bunny camera / random rays), as every lane then enters the descent at a pop.
         if (sp == 0u) return true;
         --sp;
         node = stack_node[sp];
