@@ -37,9 +37,11 @@ use kdtrace::scene::{Camera, Scene};
 use kdtrace::trace::{TraceOptions, Tracer};
 use kdtrace::{Hit, Ray};
 
-/// The engine's constants shared with its shaders (workgroup size, bindings):
-/// `glsl/examples/abi.rs`, which build.rs passes to them as `#define`s.
+/// The engine's constants and structs shared with its shaders (workgroup size,
+/// bindings, push constants, surfaces): `glsl/examples/abi.rs`, which build.rs
+/// passes to them as `#define`s and generated GLSL declarations.
 mod abi {
+    include!(concat!(env!("CARGO_MANIFEST_DIR"), "/src/gpu_struct.rs"));
     include!(concat!(env!("CARGO_MANIFEST_DIR"), "/glsl/examples/abi.rs"));
 }
 use abi::*;
@@ -102,19 +104,6 @@ pub fn scene_camera(path: &Path, scene: &Scene) -> Result<Camera> {
     Ok(camera.unwrap_or_else(|| Camera::frame(&scene.bounds)))
 }
 
-/// Push constants of `raygen.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct CameraParams {
-    eye: [f32; 4],
-    forward: [f32; 4],
-    right: [f32; 4],
-    up: [f32; 4],
-    width: u32,
-    height: u32,
-    pad: [u32; 2],
-}
-
 impl CameraParams {
     /// The same pinhole model as `Camera::ray`: basis in f64, scaled by the field of view.
     fn new(camera: &Camera, width: u32, height: u32) -> CameraParams {
@@ -131,25 +120,10 @@ impl CameraParams {
             up: v4(up * tan),
             width,
             height,
-            pad: [0; 2],
+            pad0: 0,
+            pad1: 0,
         }
     }
-}
-
-/// Push constants of `shade.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct ShadeParams {
-    count: u32,
-}
-
-/// One entry of the engine's per-triangle surface buffer (`Surface` in `shade.comp`).
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Surface {
-    normal: [f32; 4],
-    albedo: [f32; 4],
-    emission: [f32; 4],
 }
 
 /// The engine's material system: geometric normal, albedo and emission per

@@ -10,16 +10,14 @@
 // z = near for every vertex gives the depth near / w: 1 at the near plane and
 // falling toward 0 at infinity (reversed, infinite far plane; compare GREATER).
 
-layout(location = 0) in vec3 position;
-layout(location = 0) flat out uint prim;
+#extension GL_GOOGLE_include_directive : require
 
-layout(push_constant) uniform View {
-    vec4 eye;       // xyz
-    vec4 right;     // right * tan(fov/2) * aspect, divided by its squared length
-    vec4 up;        // up * tan(fov/2), divided by its squared length
-    vec4 forward;   // unit
-    vec4 params;    // x: near distance; y, z: NDC shift of this sample's jitter
-} view;
+#include "raster.glsl"
+
+layout(location = RASTER_LOCATION_POSITION) in vec3 position;
+layout(location = RASTER_LOCATION_PRIM) flat out uint prim;
+
+layout(push_constant) uniform Push { RasterView view; };
 
 void main() {
     vec3 q = position - view.eye.xyz;

@@ -96,6 +96,30 @@ pub const CAREFUL_HEADER_WORDS: u32 = 4;
 /// guaranteed minimum of `maxComputeWorkGroupCount`; more listed rays take more rows (y).
 pub const CAREFUL_MAX_GROUPS: u32 = 65535;
 
+// The interface of the raster pipeline (`glsl/raster_visibility.vert`, `.frag`).
+/// Vertex buffer binding of the scene's vertices (3 per triangle, `vec3` each).
+pub const RASTER_VERTEX_BINDING: u32 = 0;
+/// Vertex attribute location of the position.
+pub const RASTER_LOCATION_POSITION: u32 = 0;
+/// Location of the triangle number passed from the vertex to the fragment stage.
+pub const RASTER_LOCATION_PRIM: u32 = 0;
+/// Location of the fragment output: the visibility buffer, color attachment 0.
+pub const RASTER_LOCATION_VISIBILITY: u32 = 0;
+
+// Descriptor bindings of the layout probe (`glsl/layout_probe.comp`, tests only).
+/// Element 1 of a `Ray` buffer.
+pub const PROBE_BINDING_RAYS: u32 = 0;
+/// Element 1 of a `Hit` buffer.
+pub const PROBE_BINDING_HITS: u32 = 1;
+/// Elements 1 and 2 of a kd-tree node buffer (an interior node and a leaf).
+pub const PROBE_BINDING_NODES: u32 = 2;
+/// Element 1 of a `RasterView` buffer.
+pub const PROBE_BINDING_RASTER_VIEWS: u32 = 3;
+/// The words written back.
+pub const PROBE_BINDING_WORDS: u32 = 4;
+/// Number of bindings of the layout probe.
+pub const PROBE_BINDINGS: u32 = 5;
+
 // The passes of the trace kernel (specialization constant `PASS`).
 /// One pass: packets, the plain kernels, and variants traced carefully at once.
 pub const PASS_ONE: u32 = 0;
@@ -157,6 +181,15 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("RQ_BINDING_HITS", RQ_BINDING_HITS),
     ("CAREFUL_HEADER_WORDS", CAREFUL_HEADER_WORDS),
     ("CAREFUL_MAX_GROUPS", CAREFUL_MAX_GROUPS),
+    ("RASTER_VERTEX_BINDING", RASTER_VERTEX_BINDING),
+    ("RASTER_LOCATION_POSITION", RASTER_LOCATION_POSITION),
+    ("RASTER_LOCATION_PRIM", RASTER_LOCATION_PRIM),
+    ("RASTER_LOCATION_VISIBILITY", RASTER_LOCATION_VISIBILITY),
+    ("PROBE_BINDING_RAYS", PROBE_BINDING_RAYS),
+    ("PROBE_BINDING_HITS", PROBE_BINDING_HITS),
+    ("PROBE_BINDING_NODES", PROBE_BINDING_NODES),
+    ("PROBE_BINDING_RASTER_VIEWS", PROBE_BINDING_RASTER_VIEWS),
+    ("PROBE_BINDING_WORDS", PROBE_BINDING_WORDS),
     ("PASS_ONE", PASS_ONE),
     ("PASS_FAST", PASS_FAST),
     ("PASS_CAREFUL", PASS_CAREFUL),

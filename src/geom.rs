@@ -1,8 +1,9 @@
 //! Geometry shared by the builder, the CPU traversals and the GPU layouts:
 //! boxes, rays, hits and the watertight ray/triangle test.
 
-use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+
+pub use crate::abi::{Hit, Ray};
 
 /// An axis-aligned box. The empty box has `min > max`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,22 +78,6 @@ impl Aabb {
     }
 }
 
-/// A ray as stored in ray files and GPU buffers (32 bytes, std430 `Ray` in
-/// `glsl/shared/ray.glsl`): the segment `origin + t * dir`, `tmin <= t <= tmax`.
-/// `dir` need not be normalized; `tmax` may be `+inf`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct Ray {
-    /// Origin, world units.
-    pub origin: [f32; 3],
-    /// Start of the segment, in units of `dir` (usually 0).
-    pub tmin: f32,
-    /// Direction; need not be normalized, must not be zero.
-    pub dir: [f32; 3],
-    /// End of the segment, in units of `dir`; may be `+inf`.
-    pub tmax: f32,
-}
-
 impl Ray {
     /// The segment `origin + t * dir`, `tmin <= t <= tmax`.
     pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
@@ -114,24 +99,6 @@ impl Ray {
         let d = self.traced_dir();
         o.is_finite() && !d.is_nan() && d != Vec3::ZERO && !self.tmin.is_nan() && !self.tmax.is_nan()
     }
-}
-
-/// A hit as stored in hit files and GPU buffers (16 bytes, std430 `Hit` in
-/// `glsl/shared/ray.glsl`). The hit point is `(1-u-v)·v0 + u·v1 + v·v2` of
-/// triangle `prim_id`; `prim_id` is `PRIM_MISS`, `PRIM_INVALID` or
-/// `PRIM_INCOMPLETE` when there is no hit.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct Hit {
-    /// Ray parameter of the hit, in units of `dir`; `+inf` for a miss, NaN for an
-    /// invalid or incomplete ray.
-    pub t: f32,
-    /// Triangle index (scene order), or `PRIM_MISS`, `PRIM_INVALID`, `PRIM_INCOMPLETE`.
-    pub prim_id: u32,
-    /// Barycentric weight of `v1`; 0 without a hit.
-    pub u: f32,
-    /// Barycentric weight of `v2`; 0 without a hit.
-    pub v: f32,
 }
 
 impl Hit {

@@ -132,6 +132,9 @@
 //! [gpu-allocator]: https://crates.io/crates/gpu-allocator
 #![warn(missing_docs)]
 
+#[macro_use]
+mod gpu_struct;
+mod abi;
 #[cfg(feature = "cli")]
 pub mod bench;
 /// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).

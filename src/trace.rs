@@ -97,7 +97,6 @@
 use std::sync::Arc;
 
 use ash::vk;
-use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
@@ -118,20 +117,7 @@ use crate::kdtree::traverse::{Counters, Traversal, Variant};
 use crate::kdtree::{KdNode, KdTree};
 use crate::ray_query::RayQueryScene;
 
-/// Push constants of `trace.comp` (`TraceParams` in glsl/shared/ray.glsl).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct TraceParams {
-    /// xyz: the scene box's minimum corner (w unused).
-    pub scene_min: [f32; 4],
-    /// xyz: the scene box's maximum corner (w unused).
-    pub scene_max: [f32; 4],
-    /// Rays in this dispatch.
-    pub ray_count: u32,
-    /// Padding to 48 bytes; zeros (the kernel uses the first as a zero its
-    /// compiler cannot fold, see `shift_to_scene` in glsl/trace.comp).
-    pub pad: [u32; 3],
-}
+pub use crate::abi::TraceParams;
 
 /// Options of one `trace` call.
 #[derive(Clone, Copy, Debug)]
@@ -856,7 +842,9 @@ impl Tracer {
             scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
             scene_max: [b.max.x, b.max.y, b.max.z, 0.0],
             ray_count: count,
-            pad: [0; 3],
+            pad0: 0,
+            pad1: 0,
+            pad2: 0,
         };
         let push = bytemuck::bytes_of(&params);
         let device = &self.ctx.device;

@@ -1,16 +1,52 @@
-//! Proves that the Rust mirrors of the shared GLSL structs agree with the shader's
-//! view of them: sizes and offsets on the Rust side, field by field on the GPU
-//! side (glsl/layout_probe.comp reads each struct of the tracer and writes its
-//! fields back; glsl/render_layout_probe.comp those of the renderer).
+//! Proves that the Rust structs shared with the shaders agree with the shaders'
+//! view of them, field by field on the device: each layout probe kernel reads
+//! its structs (a push constant block and element 1 of a buffer of each other
+//! struct, so the stride counts too) and writes every field back as raw words in
+//! declaration order with the `put` build.rs generates from the struct's
+//! `gpu_struct!`. Each field is given distinct words, so every word must come
+//! back from where the Rust struct puts it:
+//! glsl/layout_probe.comp (the tracer's `Ray`, `Hit`, `TraceParams`, the kd-tree
+//! node and the raster pass's `RasterView`), glsl/render_layout_probe.comp (the
+//! renderer's) and glsl/examples/layout_probe.comp (the example engine's).
 
 mod common;
 
+#[macro_use]
+#[allow(unused_macros)]
+mod gpu_struct {
+    include!("../src/gpu_struct.rs");
+}
+
+/// The renderer's structs (private to `kdtrace::render`), from their one source.
+#[allow(dead_code)]
+mod render_structs {
+    include!("../src/render/structs.rs");
+}
+
+/// The renderer's constants (private to `kdtrace::render`): the probe's bindings.
+#[allow(dead_code)]
+mod render_consts {
+    include!("../src/render/consts.rs");
+}
+
+/// The example engine's constants and structs (`examples/embed.rs`).
+#[allow(dead_code)]
+mod engine_abi {
+    include!("../glsl/examples/abi.rs");
+}
+
 use std::mem::{offset_of, size_of};
+use std::sync::Arc;
 
 use ash::vk;
+use bytemuck::Pod;
 use common::{assert_validation_clean, context};
 use gpu_allocator::MemoryLocation;
-use kdtrace::gpu::{shaders, Buffer, BufferSet, Kernel, KernelDesc};
+use kdtrace::consts::{
+    PROBE_BINDINGS, PROBE_BINDING_HITS, PROBE_BINDING_NODES, PROBE_BINDING_RASTER_VIEWS, PROBE_BINDING_RAYS,
+    PROBE_BINDING_WORDS,
+};
+use kdtrace::gpu::{shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc, RasterView};
 use kdtrace::kdtree::KdNode;
 use kdtrace::trace::TraceParams;
 use kdtrace::{Hit, Ray};
@@ -34,63 +70,103 @@ fn rust_sizes_and_offsets_match_std430() {
     assert_eq!(offset_of!(TraceParams, scene_min), 0);
     assert_eq!(offset_of!(TraceParams, scene_max), 16);
     assert_eq!(offset_of!(TraceParams, ray_count), 32);
+    assert_eq!(size_of::<RasterView>(), 80);
+    assert_eq!(size_of::<render_structs::RenderParams>(), 128);
+}
+
+/// A `T` whose 4-byte words are all distinct (and normal floats, so that no
+/// device flushes them): `0x4000_0000 | tag << 12 | index`.
+fn distinct<T: Pod>(tag: u32) -> T {
+    let words: Vec<u32> = (0..(size_of::<T>() / 4) as u32).map(|i| 0x4000_0000 | (tag << 12) | i).collect();
+    bytemuck::pod_read_unaligned(bytemuck::cast_slice(&words))
+}
+
+fn words_of<T: Pod>(value: &T) -> Vec<u32> {
+    bytemuck::bytes_of(value).chunks(4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]])).collect()
+}
+
+/// Buffers of `[zeroed, element]` whose element 1 the probe reads.
+struct Probe {
+    ctx: Arc<GpuContext>,
+    /// `(binding, buffer)` of the inputs.
+    inputs: Vec<(u32, Buffer)>,
+    /// The words the probe must write back, in order.
+    expected: Vec<u32>,
+}
+
+impl Probe {
+    fn new(ctx: &Arc<GpuContext>) -> Probe {
+        Probe { ctx: ctx.clone(), inputs: Vec::new(), expected: Vec::new() }
+    }
+
+    /// Binds `[zeroed, element]` at `binding`; the probe writes `element`'s fields back.
+    fn element<T: Pod>(&mut self, binding: u32, element: T) {
+        self.raw(binding, &[T::zeroed(), element]);
+        self.expected.extend(words_of(&element));
+    }
+
+    /// Binds `data` at `binding` (what comes back is the caller's to expect).
+    fn raw<T: Pod>(&mut self, binding: u32, data: &[T]) {
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let buffer = Buffer::with_data(&self.ctx, bytemuck::cast_slice(data), usage, "probe input").unwrap();
+        self.inputs.push((binding, buffer));
+    }
+
+    /// Runs `spirv` with `push` as its push constants (whose words come back
+    /// first) and the output at `words_binding`; asserts every word.
+    fn run<P: Pod>(mut self, name: &str, spirv: &[u8], push: P, words_binding: u32, bindings: u32) {
+        let mut expected = words_of(&push);
+        expected.append(&mut self.expected);
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        let bytes = 4 * expected.len() as u64;
+        let out = Buffer::new(&self.ctx, bytes, usage, MemoryLocation::GpuToCpu, "words").unwrap();
+        let kernel = Kernel::new(
+            &self.ctx,
+            &KernelDesc {
+                name,
+                spirv,
+                bindings,
+                push_constant_size: size_of::<P>() as u32,
+                workgroup_size: 1,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut bound: Vec<(u32, &Buffer)> = self.inputs.iter().map(|(b, buf)| (*b, buf)).collect();
+        bound.push((words_binding, &out));
+        bound.sort_by_key(|(b, _)| *b);
+        assert!(bound.iter().enumerate().all(|(i, (b, _))| i as u32 == *b), "{name}: every binding once");
+        let buffers: Vec<&Buffer> = bound.iter().map(|(_, buf)| *buf).collect();
+        let set = BufferSet::new(&self.ctx, &kernel, &buffers).unwrap();
+        self.ctx
+            .submit_and_wait(|cmd| {
+                // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
+                unsafe {
+                    kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&push), 1);
+                    self.ctx.record_host_read_barrier(cmd);
+                }
+            })
+            .unwrap();
+        let words: &[u32] = bytemuck::cast_slice(out.read(0, bytes as usize).unwrap());
+        assert_eq!(words, &expected[..], "{name}: words written back");
+        drop((set, kernel, buffers, bound));
+        drop(out);
+        let ctx = self.ctx.clone();
+        drop(self);
+        assert_validation_clean(&ctx);
+    }
 }
 
 #[test]
 fn gpu_reads_every_field_where_rust_wrote_it() {
     let ctx = context();
-    let rays =
-        [Ray::default(), Ray { origin: [1.5, -2.25, 3.0], tmin: 0.125, dir: [-4.0, 5.5, -6.75], tmax: f32::INFINITY }];
-    let hits = [Hit::MISS, Hit { t: 7.5, prim_id: 123_456, u: 0.25, v: 0.625 }];
+    let mut probe = Probe::new(&ctx);
+    probe.element::<Ray>(PROBE_BINDING_RAYS, distinct(1));
+    probe.element::<Hit>(PROBE_BINDING_HITS, distinct(2));
+    // The kd-tree node is a `uvec2` decoded by kdnode.glsl: an interior node and a leaf.
     let nodes = [KdNode::leaf(0, 0), KdNode::interior(2, -17.5, 98_765), KdNode::leaf(4321, 77)];
-    let params = TraceParams {
-        scene_min: [-1.0, -2.0, -3.0, 42.0],
-        scene_max: [4.0, 5.0, 6.0, 0.0],
-        ray_count: 987_654,
-        pad: [11, 22, 33],
-    };
-    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let ray_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&rays), usage, "rays").unwrap();
-    let hit_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&hits), usage, "hits").unwrap();
-    let node_buf = Buffer::with_data(&ctx, bytemuck::cast_slice(&nodes), usage, "nodes").unwrap();
-    let out = Buffer::new(&ctx, 4 * 64, usage, MemoryLocation::GpuToCpu, "words").unwrap();
-    let kernel = Kernel::new(
-        &ctx,
-        &KernelDesc {
-            name: "layout_probe",
-            spirv: shaders::LAYOUT_PROBE,
-            bindings: 4,
-            push_constant_size: size_of::<TraceParams>() as u32,
-            workgroup_size: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let set = BufferSet::new(&ctx, &kernel, &[&ray_buf, &hit_buf, &node_buf, &out]).unwrap();
-    ctx.submit_and_wait(|cmd| {
-        // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
-        unsafe {
-            kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), 1);
-            ctx.record_host_read_barrier(cmd);
-        }
-    })
-    .unwrap();
-    let words: &[u32] = bytemuck::cast_slice(out.read(0, 4 * 25).unwrap());
-    let r = rays[1];
-    let h = hits[1];
-    let expected: Vec<u32> = vec![
-        r.origin[0].to_bits(),
-        r.origin[1].to_bits(),
-        r.origin[2].to_bits(),
-        r.tmin.to_bits(),
-        r.dir[0].to_bits(),
-        r.dir[1].to_bits(),
-        r.dir[2].to_bits(),
-        r.tmax.to_bits(),
-        h.t.to_bits(),
-        h.prim_id,
-        h.u.to_bits(),
-        h.v.to_bits(),
+    probe.raw(PROBE_BINDING_NODES, &nodes);
+    probe.expected.extend([
         0,
         nodes[1].axis() as u32,
         nodes[1].split().to_bits(),
@@ -98,88 +174,51 @@ fn gpu_reads_every_field_where_rust_wrote_it() {
         1,
         nodes[2].prim_count(),
         nodes[2].prim_offset(),
-        params.scene_min[0].to_bits(),
-        params.scene_min[3].to_bits(),
-        params.scene_max[1].to_bits(),
-        params.ray_count,
-        params.pad[0],
-        params.pad[2],
-    ];
-    assert_eq!(words, &expected[..]);
+    ]);
     assert_eq!((nodes[1].axis(), nodes[1].split(), nodes[1].above_child()), (2, -17.5, 98_765));
     assert_eq!((nodes[2].prim_count(), nodes[2].prim_offset()), (77, 4321));
-    drop((set, kernel, ray_buf, hit_buf, node_buf, out));
-    assert_validation_clean(&ctx);
+    probe.element::<RasterView>(PROBE_BINDING_RASTER_VIEWS, distinct(3));
+    let params: TraceParams = distinct(4);
+    probe.run("layout_probe", shaders::LAYOUT_PROBE, params, PROBE_BINDING_WORDS, PROBE_BINDINGS);
 }
 
-/// The renderer's structs (`glsl/shared/render.glsl`): glsl/render_layout_probe.comp
-/// writes back the `RenderParams` push constants and element 1 of each scene and
-/// queue struct field by field in declaration order. `RenderParams` is filled
-/// through its Rust fields; the others (private to the renderer, their sizes and
-/// repr(C) field order tested in src/render/abi.rs) with distinct raw words, so
-/// every field must come back from where the Rust mirror puts it.
+/// The renderer's structs (src/render/structs.rs).
 #[test]
 fn gpu_reads_every_render_field_where_rust_wrote_it() {
-    use kdtrace::render::RenderParams;
+    use render_consts::*;
+    use render_structs::*;
     let ctx = context();
-    let params = RenderParams {
-        eye: [1.0, 2.0, 3.0, 4.0],
-        forward: [5.0, 6.0, 7.0, 8.0],
-        right: [9.0, 10.0, 11.0, 12.0],
-        up: [13.0, 14.0, 15.0, 16.0],
-        background: [17.0, 18.0, 19.0, 20.0],
-        width: 21,
-        height: 22,
-        count: 23,
-        sample_index: 24,
-        seed: 25,
-        max_depth: 26,
-        bounces: 27,
-        ao_samples: 28,
-        ao_radius: 29.5,
-        light_count: 30,
-        emitter_count: 31,
-        shadow_capacity: 32,
-    };
-    // Words per element of Surface, Material, Emitter, PointLight, Path.
-    let words_per = [12usize, 12, 4, 8, 8];
-    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let mut expected: Vec<u32> = bytemuck::cast_slice(bytemuck::bytes_of(&params)).to_vec();
-    let mut buffers = Vec::new();
-    for (i, &n) in words_per.iter().enumerate() {
-        // Element 0 zero, element 1 distinct words (so the stride counts too).
-        let element: Vec<u32> = (0..n as u32).map(|w| 0x1000 * (i as u32 + 1) + w).collect();
-        let data: Vec<u32> = std::iter::repeat_n(0, n).chain(element.iter().copied()).collect();
-        expected.extend(&element);
-        buffers.push(Buffer::with_data(&ctx, bytemuck::cast_slice(&data), usage, "render struct").unwrap());
-    }
-    let out = Buffer::new(&ctx, 4 * expected.len() as u64, usage, MemoryLocation::GpuToCpu, "words").unwrap();
-    let kernel = Kernel::new(
-        &ctx,
-        &KernelDesc {
-            name: "render_layout_probe",
-            spirv: shaders::RENDER_LAYOUT_PROBE,
-            bindings: 6,
-            push_constant_size: size_of::<RenderParams>() as u32,
-            workgroup_size: 1,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let mut bound: Vec<&Buffer> = buffers.iter().collect();
-    bound.push(&out);
-    let set = BufferSet::new(&ctx, &kernel, &bound).unwrap();
-    ctx.submit_and_wait(|cmd| {
-        // SAFETY: `cmd` is recording; all buffers outlive the waited submission.
-        unsafe {
-            kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), 1);
-            ctx.record_host_read_barrier(cmd);
-        }
-    })
-    .unwrap();
-    let words: &[u32] = bytemuck::cast_slice(out.read(0, 4 * expected.len()).unwrap());
-    assert_eq!(words, &expected[..]);
-    drop((set, kernel, bound));
-    drop((buffers, out));
-    assert_validation_clean(&ctx);
+    let mut probe = Probe::new(&ctx);
+    probe.element::<Surface>(RENDER_PROBE_BINDING_SURFACES, distinct(1));
+    probe.element::<GpuMaterial>(RENDER_PROBE_BINDING_MATERIALS, distinct(2));
+    probe.element::<Emitter>(RENDER_PROBE_BINDING_EMITTERS, distinct(3));
+    probe.element::<GpuLight>(RENDER_PROBE_BINDING_LIGHTS, distinct(4));
+    probe.element::<GpuPath>(RENDER_PROBE_BINDING_PATHS, distinct(5));
+    // The library's `RenderParams` is this one.
+    let params: kdtrace::render::RenderParams = distinct(6);
+    probe.run(
+        "render_layout_probe",
+        shaders::RENDER_LAYOUT_PROBE,
+        params,
+        RENDER_PROBE_BINDING_WORDS,
+        RENDER_PROBE_BINDINGS,
+    );
+}
+
+/// The example engine's structs (glsl/examples/abi.rs).
+#[test]
+fn gpu_reads_every_engine_field_where_rust_wrote_it() {
+    use engine_abi::*;
+    let ctx = context();
+    let mut probe = Probe::new(&ctx);
+    probe.element::<ShadeParams>(ENGINE_PROBE_BINDING_SHADE_PARAMS, distinct(1));
+    probe.element::<Surface>(ENGINE_PROBE_BINDING_SURFACES, distinct(2));
+    let camera: CameraParams = distinct(3);
+    probe.run(
+        "example_layout_probe",
+        shaders::EXAMPLE_LAYOUT_PROBE,
+        camera,
+        ENGINE_PROBE_BINDING_WORDS,
+        ENGINE_PROBE_BINDINGS,
+    );
 }

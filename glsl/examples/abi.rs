@@ -1,8 +1,11 @@
 // The engine's side of its contract with its own shaders (glsl/examples/*.comp),
-// as examples/embed.rs would keep it: build.rs includes this file by path and
-// passes `EXAMPLE_SHADER_DEFINES` to those shaders as `#define NAME value`
-// (beside kdtrace.glsl, the one header of kdtrace they include), and
-// examples/embed.rs includes it too, so each value is written once, here.
+// as examples/embed.rs would keep it: build.rs includes this file by path,
+// passes `EXAMPLE_SHADER_DEFINES` to those shaders as `#define NAME value` and
+// writes the GLSL declarations of the structs below into the generated header
+// `engine.glsl` (beside kdtrace.glsl, the one header of kdtrace they include);
+// examples/embed.rs includes it too, so each value and struct is written once,
+// here. Structs are declared with `gpu_struct!` (src/gpu_struct.rs, included
+// before this file).
 
 /// Invocations per workgroup of the engine's shaders (`local_size_x` in both).
 pub const ENGINE_WORKGROUP: u32 = 64;
@@ -25,6 +28,62 @@ pub const ENGINE_SHADE_BINDING_PIXELS: u32 = 3;
 /// Number of bindings of `shade.comp`.
 pub const ENGINE_SHADE_BINDINGS: u32 = 4;
 
+// Descriptor bindings of `layout_probe.comp` (tests/embed.rs).
+/// Element 1 of a `ShadeParams` buffer.
+pub const ENGINE_PROBE_BINDING_SHADE_PARAMS: u32 = 0;
+/// Element 1 of a `Surface` buffer.
+pub const ENGINE_PROBE_BINDING_SURFACES: u32 = 1;
+/// The words written back.
+pub const ENGINE_PROBE_BINDING_WORDS: u32 = 2;
+/// Number of bindings of `layout_probe.comp`.
+pub const ENGINE_PROBE_BINDINGS: u32 = 3;
+
+gpu_struct! {
+    /// Push constants of `raygen.comp`: the camera basis, scaled so that pixel
+    /// (x, y) looks along forward + sx * right + sy * up with sx, sy in [-1, 1].
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct CameraParams {
+        /// xyz: the eye.
+        pub eye: [f32; 4],
+        /// xyz: the unit view direction.
+        pub forward: [f32; 4],
+        /// xyz: right * tan(fov / 2) * aspect.
+        pub right: [f32; 4],
+        /// xyz: up * tan(fov / 2).
+        pub up: [f32; 4],
+        /// Image width.
+        pub width: u32,
+        /// Image height.
+        pub height: u32,
+        /// Padding to 16 bytes (0).
+        pub pad0: u32,
+        /// Padding to 16 bytes (0).
+        pub pad1: u32,
+    }
+}
+
+gpu_struct! {
+    /// Push constants of `shade.comp`.
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct ShadeParams {
+        /// Pixels shaded.
+        pub count: u32,
+    }
+}
+
+gpu_struct! {
+    /// The engine's per-triangle surface data, indexed by `prim_id` (`shade.comp`).
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct Surface {
+        /// xyz: unit geometric normal.
+        pub normal: [f32; 4],
+        /// rgb: the diffuse colour.
+        pub albedo: [f32; 4],
+        /// rgb: the emission, clamped to 1.
+        pub emission: [f32; 4],
+    }
+}
+
 /// Every constant above, as `#define`s for the example's shaders (read by build.rs).
 #[allow(dead_code)]
 pub const EXAMPLE_SHADER_DEFINES: &[(&str, u32)] = &[
@@ -34,4 +93,7 @@ pub const EXAMPLE_SHADER_DEFINES: &[(&str, u32)] = &[
     ("ENGINE_SHADE_BINDING_HITS", ENGINE_SHADE_BINDING_HITS),
     ("ENGINE_SHADE_BINDING_SURFACES", ENGINE_SHADE_BINDING_SURFACES),
     ("ENGINE_SHADE_BINDING_PIXELS", ENGINE_SHADE_BINDING_PIXELS),
+    ("ENGINE_PROBE_BINDING_SHADE_PARAMS", ENGINE_PROBE_BINDING_SHADE_PARAMS),
+    ("ENGINE_PROBE_BINDING_SURFACES", ENGINE_PROBE_BINDING_SURFACES),
+    ("ENGINE_PROBE_BINDING_WORDS", ENGINE_PROBE_BINDING_WORDS),
 ];

@@ -2,26 +2,19 @@
 // examples/embed.rs, pass 1: the engine's own ray generation. One pinhole-camera
 // ray per pixel, written as kdtrace `Ray`s into a range of the engine's buffer.
 // Compiled against kdtrace.glsl alone (shaders::HEADER), as a user's shader is,
-// with the engine's own ENGINE_* #defines (glsl/examples/abi.rs).
+// with the engine's own ENGINE_* #defines and structs (engine.glsl, generated
+// from glsl/examples/abi.rs).
 
 #extension GL_GOOGLE_include_directive : require
 
 #include "kdtrace.glsl"
+#include "engine.glsl"
 
 layout(local_size_x = ENGINE_WORKGROUP) in;
 
 layout(std430, set = 0, binding = ENGINE_RAYGEN_BINDING_RAYS) writeonly buffer Rays { Ray rays[]; };
 
-// The camera basis, scaled so that pixel (x, y) looks along
-// forward + sx * right + sy * up with sx, sy in [-1, 1] (src: examples/embed.rs).
-layout(push_constant) uniform CameraParams {
-    vec4 eye;
-    vec4 forward;
-    vec4 right;   // right * tan(fov / 2) * aspect
-    vec4 up;      // up * tan(fov / 2)
-    uint width;
-    uint height;
-} cam;
+layout(push_constant) uniform Push { CameraParams cam; };
 
 void main() {
     uint index = gl_GlobalInvocationID.x;

@@ -2,29 +2,22 @@
 // examples/embed.rs, pass 3: the engine's own shading of kdtrace's hits. A light
 // at the eye on each triangle's diffuse colour (as `kdtrace render` shades),
 // written as sRGB RGBA8 pixels. Compiled against kdtrace.glsl alone, with the
-// engine's own ENGINE_* #defines (glsl/examples/abi.rs).
+// engine's own ENGINE_* #defines and structs (engine.glsl, generated from
+// glsl/examples/abi.rs).
 
 #extension GL_GOOGLE_include_directive : require
 
 #include "kdtrace.glsl"
+#include "engine.glsl"
 
 layout(local_size_x = ENGINE_WORKGROUP) in;
-
-// The engine's per-triangle surface data, indexed by prim_id.
-struct Surface {
-    vec4 normal;    // xyz: unit geometric normal
-    vec4 albedo;    // rgb
-    vec4 emission;  // rgb, clamped to 1
-};
 
 layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
 layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_HITS) readonly buffer Hits { Hit hits[]; };
 layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
 layout(std430, set = 0, binding = ENGINE_SHADE_BINDING_PIXELS) writeonly buffer Pixels { uint pixels[]; };
 
-layout(push_constant) uniform ShadeParams {
-    uint count;
-} params;
+layout(push_constant) uniform Push { ShadeParams params; };
 
 float srgb(float c) {
     c = clamp(c, 0.0, 1.0);

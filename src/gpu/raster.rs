@@ -7,29 +7,15 @@
 use std::sync::Arc;
 
 use ash::vk;
-use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
 use super::{shaders, Buffer, GpuContext};
+use crate::consts::{RASTER_LOCATION_POSITION, RASTER_LOCATION_VISIBILITY, RASTER_VERTEX_BINDING};
 use crate::error::{Error, Result, VkContext};
 
-/// Push constants of `raster_visibility.vert` (80 bytes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct RasterView {
-    /// xyz: the eye.
-    pub eye: [f32; 4],
-    /// xyz: the camera's scaled right vector divided by its squared length.
-    pub right: [f32; 4],
-    /// xyz: the camera's scaled up vector divided by its squared length.
-    pub up: [f32; 4],
-    /// xyz: the unit view direction.
-    pub forward: [f32; 4],
-    /// x: near distance; y, z: NDC shift of the sample's sub-pixel position.
-    pub params: [f32; 4],
-}
+pub use crate::abi::RasterView;
 
 impl RasterView {
     /// The view of the pinhole camera `[eye, forward, right, up]`
@@ -154,7 +140,9 @@ impl Rasterizer {
                 .initial_layout(vk::ImageLayout::UNDEFINED)
                 .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
         ];
+        // The subpass's color attachment `RASTER_LOCATION_VISIBILITY` (the only one) is attachment 0.
         let color_ref = [vk::AttachmentReference { attachment: 0, layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL }];
+        const { assert!(RASTER_LOCATION_VISIBILITY == 0) };
         let depth_ref =
             vk::AttachmentReference { attachment: 1, layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL };
         let subpass = [vk::SubpassDescription::default()
@@ -289,11 +277,14 @@ impl Rasterizer {
                 .module(frag)
                 .name(c"main"),
         ];
-        let bindings =
-            [vk::VertexInputBindingDescription { binding: 0, stride: 12, input_rate: vk::VertexInputRate::VERTEX }];
+        let bindings = [vk::VertexInputBindingDescription {
+            binding: RASTER_VERTEX_BINDING,
+            stride: std::mem::size_of::<[f32; 3]>() as u32,
+            input_rate: vk::VertexInputRate::VERTEX,
+        }];
         let attributes = [vk::VertexInputAttributeDescription {
-            location: 0,
-            binding: 0,
+            location: RASTER_LOCATION_POSITION,
+            binding: RASTER_VERTEX_BINDING,
             format: vk::Format::R32G32B32_SFLOAT,
             offset: 0,
         }];
@@ -380,7 +371,7 @@ impl Rasterizer {
         device.cmd_begin_render_pass(cmd, &begin, vk::SubpassContents::INLINE);
         device.cmd_bind_pipeline(cmd, vk::PipelineBindPoint::GRAPHICS, self.pipeline);
         device.cmd_push_constants(cmd, self.layout, vk::ShaderStageFlags::VERTEX, 0, bytemuck::bytes_of(view));
-        device.cmd_bind_vertex_buffers(cmd, 0, &[self.vertices.buffer], &[0]);
+        device.cmd_bind_vertex_buffers(cmd, RASTER_VERTEX_BINDING, &[self.vertices.buffer], &[0]);
         device.cmd_draw(cmd, self.vertex_count, 1, 0, 0);
         device.cmd_end_render_pass(cmd);
         let region = vk::BufferImageCopy {

@@ -112,6 +112,23 @@ pub const VISIBILITY_BINDING_COUNTERS: u32 = 5;
 /// Number of bindings of `render_visibility.comp`.
 pub const VISIBILITY_BINDINGS: u32 = 6;
 
+// Descriptor bindings of `render_layout_probe.comp` (tests only).
+/// Element 1 of a `Surface` buffer.
+pub const RENDER_PROBE_BINDING_SURFACES: u32 = 0;
+/// Element 1 of a `Material` buffer.
+pub const RENDER_PROBE_BINDING_MATERIALS: u32 = 1;
+/// Element 1 of an `Emitter` buffer.
+pub const RENDER_PROBE_BINDING_EMITTERS: u32 = 2;
+/// Element 1 of a `PointLight` buffer.
+pub const RENDER_PROBE_BINDING_LIGHTS: u32 = 3;
+/// Element 1 of a `Path` buffer.
+pub const RENDER_PROBE_BINDING_PATHS: u32 = 4;
+/// The words written back.
+pub const RENDER_PROBE_BINDING_WORDS: u32 = 5;
+/// Number of bindings of `render_layout_probe.comp`.
+#[allow(dead_code)]
+pub const RENDER_PROBE_BINDINGS: u32 = 6;
+
 // Specialization constant ids of the render kernels (32-bit each; bools as 0/1).
 /// `render_raygen.comp`'s jitter mode (`JITTER_*`).
 pub const RAYGEN_SPEC_JITTER: u32 = 0;
@@ -188,6 +205,12 @@ pub const RENDER_SHADER_DEFINES: &[(&str, u32)] = &[
     ("VISIBILITY_BINDING_RAYS", VISIBILITY_BINDING_RAYS),
     ("VISIBILITY_BINDING_HITS", VISIBILITY_BINDING_HITS),
     ("VISIBILITY_BINDING_COUNTERS", VISIBILITY_BINDING_COUNTERS),
+    ("RENDER_PROBE_BINDING_SURFACES", RENDER_PROBE_BINDING_SURFACES),
+    ("RENDER_PROBE_BINDING_MATERIALS", RENDER_PROBE_BINDING_MATERIALS),
+    ("RENDER_PROBE_BINDING_EMITTERS", RENDER_PROBE_BINDING_EMITTERS),
+    ("RENDER_PROBE_BINDING_LIGHTS", RENDER_PROBE_BINDING_LIGHTS),
+    ("RENDER_PROBE_BINDING_PATHS", RENDER_PROBE_BINDING_PATHS),
+    ("RENDER_PROBE_BINDING_WORDS", RENDER_PROBE_BINDING_WORDS),
     ("RAYGEN_SPEC_JITTER", RAYGEN_SPEC_JITTER),
     ("SHADE_SPEC_HEADLIGHT", SHADE_SPEC_HEADLIGHT),
     ("SHADE_SPEC_POINT_LIGHTS", SHADE_SPEC_POINT_LIGHTS),

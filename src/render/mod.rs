@@ -10,6 +10,7 @@ mod plan;
 mod resources;
 mod sample;
 mod settings;
+mod structs;
 mod wavefront;
 
 use std::path::Path;

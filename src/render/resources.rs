@@ -8,7 +8,7 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use super::abi::{
-    in_order, GpuLight, GpuMaterial, RenderParams, Surface, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, PATH_BYTES,
+    in_order, Emitter, GpuLight, GpuMaterial, RenderParams, Surface, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, PATH_BYTES,
     RAY_BYTES, SPAN_BYTES,
 };
 use super::consts::*;
@@ -163,7 +163,7 @@ impl SceneBuffers {
             .zip(&scene.material_ids)
             .map(|(t, &m)| {
                 let v = |p: Vec3, w: f32| [p.x, p.y, p.z, w];
-                Surface { v: [v(t[0], f32::from_bits(m)), v(t[1], 0.0), v(t[2], 0.0)] }
+                Surface { v0: v(t[0], f32::from_bits(m)), v1: v(t[1], 0.0), v2: v(t[2], 0.0) }
             })
             .collect();
         let surface_bytes = std::mem::size_of_val(surfaces.as_slice()) as u64;
@@ -178,8 +178,8 @@ impl SceneBuffers {
             .materials
             .iter()
             .map(|m| GpuMaterial {
-                kd_ns: [m.kd.x, m.kd.y, m.kd.z, m.ns.clamp(0.0, 1e6)],
-                ks_flags: [m.ks.x, m.ks.y, m.ks.z, f32::from_bits(material_flags(m))],
+                kd: [m.kd.x, m.kd.y, m.kd.z, m.ns.clamp(0.0, 1e6)],
+                ks: [m.ks.x, m.ks.y, m.ks.z, f32::from_bits(material_flags(m))],
                 ke: [m.ke.x, m.ke.y, m.ke.z, 0.0],
             })
             .collect();
@@ -187,7 +187,7 @@ impl SceneBuffers {
         let emitters = match (plan.emitters.is_empty(), plan.area_lights) {
             (false, _) => Buffer::with_data(ctx, bytemuck::cast_slice(&plan.emitters), storage, "emitters")?,
             (true, false) => unused(ctx)?,
-            (true, true) => Buffer::with_data(ctx, &[0; 16], storage, "emitters (none)")?,
+            (true, true) => Buffer::with_data(ctx, &[0; std::mem::size_of::<Emitter>()], storage, "emitters (none)")?,
         };
         let gpu_lights: Vec<GpuLight> = settings
             .lights
