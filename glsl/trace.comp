@@ -20,13 +20,13 @@
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
 // Specialization constants (src/trace.rs sets them; never edit the source to switch).
-layout(constant_id = 0) const uint VARIANT = VARIANT_STACK;
-layout(constant_id = 1) const bool COUNTERS = false;
-layout(constant_id = 2) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
-layout(constant_id = 3) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
-layout(constant_id = 4) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
-layout(constant_id = 5) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
-layout(constant_id = 6) const uint PASS = PASS_ONE;   // PASS_FAST / PASS_CAREFUL: robust single rays (see main)
+layout(constant_id = TRACE_SPEC_VARIANT) const uint VARIANT = VARIANT_STACK;
+layout(constant_id = TRACE_SPEC_COUNTERS) const bool COUNTERS = false;
+layout(constant_id = TRACE_SPEC_STACK_SIZE) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
+layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
+layout(constant_id = TRACE_SPEC_PACKET_WIDTH) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
+layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
+layout(constant_id = TRACE_SPEC_PASS) const uint PASS = PASS_ONE;   // PASS_FAST / PASS_CAREFUL: robust single rays (see main)
 
 // Far rays move to the scene box (shift_to_scene below) in the kernels that
 // trace carefully: the careful pass and packets. The fast pass lists them.

@@ -21,7 +21,7 @@
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
 // Specialization constants (src/ray_query.rs sets them).
-layout(constant_id = 0) const bool ANY_HIT = false;  // stop at the first hit (shadow rays)
+layout(constant_id = RQ_SPEC_ANY_HIT) const bool ANY_HIT = false;  // stop at the first hit (shadow rays)
 
 layout(set = 0, binding = RQ_BINDING_SCENE) uniform accelerationStructureEXT scene;
 layout(std430, set = 0, binding = RQ_BINDING_PRIM_IDS) readonly buffer PrimIds { uint prim_ids[]; };

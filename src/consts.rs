@@ -37,7 +37,29 @@ pub const PRIM_INVALID: u32 = 0xFFFF_FFFE;
 /// `Hit::prim_id` of a ray whose traversal did not finish (step cap or driver loop cut-off).
 pub const PRIM_INCOMPLETE: u32 = 0xFFFF_FFFD;
 
-// Traversal variant ids (specialization constant 0 of the trace kernel).
+// Specialization constant ids of the trace kernel (32-bit each; bools as 0/1).
+/// The traversal variant (`VARIANT_*`).
+pub const TRACE_SPEC_VARIANT: u32 = 0;
+/// Write per-ray counters (`bool`).
+pub const TRACE_SPEC_COUNTERS: u32 = 1;
+/// Short-stack entries, 1..=`MAX_SHORT_STACK`.
+pub const TRACE_SPEC_STACK_SIZE: u32 = 2;
+/// Stop at the first hit (shadow rays; `bool`).
+pub const TRACE_SPEC_ANY_HIT: u32 = 3;
+/// Lanes per packet; 1 = single rays.
+pub const TRACE_SPEC_PACKET_WIDTH: u32 = 4;
+/// Conservative decisions and the f64 fallback near edges (`bool`).
+pub const TRACE_SPEC_ROBUST: u32 = 5;
+/// The pass (`PASS_*`).
+pub const TRACE_SPEC_PASS: u32 = 6;
+/// Number of specialization constants of the trace kernel.
+pub const TRACE_SPECS: u32 = 7;
+/// The ray-query kernel's only specialization constant: stop at the first hit (`bool`).
+pub const RQ_SPEC_ANY_HIT: u32 = 0;
+/// Number of specialization constants of the ray-query kernel.
+pub const RQ_SPECS: u32 = 1;
+
+// Traversal variant ids (specialization constant `TRACE_SPEC_VARIANT` of the trace kernel).
 /// Variant id of `stack`: full per-ray stack (pbrt-v3), the baseline.
 pub const VARIANT_STACK: u32 = 0;
 /// Variant id of `restart`: kd-restart from the root (Foley & Sugerman 2005).
@@ -120,7 +142,7 @@ pub const PROBE_BINDING_WORDS: u32 = 4;
 /// Number of bindings of the layout probe.
 pub const PROBE_BINDINGS: u32 = 5;
 
-// The passes of the trace kernel (specialization constant `PASS`).
+// The passes of the trace kernel (specialization constant `TRACE_SPEC_PASS`).
 /// One pass: packets, the plain kernels, and variants traced carefully at once.
 pub const PASS_ONE: u32 = 0;
 /// Robust single rays, first pass: trace fast; list the rays that need the careful pass.
@@ -158,6 +180,14 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),
     ("PRIM_INCOMPLETE", PRIM_INCOMPLETE),
+    ("TRACE_SPEC_VARIANT", TRACE_SPEC_VARIANT),
+    ("TRACE_SPEC_COUNTERS", TRACE_SPEC_COUNTERS),
+    ("TRACE_SPEC_STACK_SIZE", TRACE_SPEC_STACK_SIZE),
+    ("TRACE_SPEC_ANY_HIT", TRACE_SPEC_ANY_HIT),
+    ("TRACE_SPEC_PACKET_WIDTH", TRACE_SPEC_PACKET_WIDTH),
+    ("TRACE_SPEC_ROBUST", TRACE_SPEC_ROBUST),
+    ("TRACE_SPEC_PASS", TRACE_SPEC_PASS),
+    ("RQ_SPEC_ANY_HIT", RQ_SPEC_ANY_HIT),
     ("VARIANT_STACK", VARIANT_STACK),
     ("VARIANT_RESTART", VARIANT_RESTART),
     ("VARIANT_PUSH_DOWN", VARIANT_PUSH_DOWN),

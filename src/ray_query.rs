@@ -19,10 +19,10 @@ use std::sync::Arc;
 use ash::vk;
 use glam::Vec3;
 
-use crate::consts::{RQ_BINDINGS, RQ_BINDING_SCENE, TRACE_WORKGROUP_SIZE};
+use crate::consts::{RQ_BINDINGS, RQ_BINDING_SCENE, RQ_SPECS, RQ_SPEC_ANY_HIT, TRACE_WORKGROUP_SIZE};
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
-use crate::gpu::{shaders, Buffer, GpuContext, Kernel, KernelDesc, TriangleAccel};
+use crate::gpu::{in_order, shaders, Buffer, GpuContext, Kernel, KernelDesc, TriangleAccel};
 use crate::kdtree::build::is_skipped;
 use crate::trace::TraceParams;
 
@@ -125,7 +125,7 @@ pub(crate) fn kernel(ctx: &Arc<GpuContext>, any_hit: bool) -> Result<Kernel> {
             spirv: shaders::TRACE_RAY_QUERY,
             bindings: RQ_BINDINGS,
             push_constant_size: std::mem::size_of::<TraceParams>() as u32,
-            spec_constants: &[any_hit as u32],
+            spec_constants: &in_order::<_, { RQ_SPECS as usize }>([(RQ_SPEC_ANY_HIT, any_hit as u32)]),
             workgroup_size: TRACE_WORKGROUP_SIZE,
             acceleration_structures: &[RQ_BINDING_SCENE],
             ..Default::default()

@@ -105,12 +105,13 @@ use crate::consts::{
     BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY,
     COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, PASS_CAREFUL,
     PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, RQ_BINDINGS, RQ_BINDING_HITS, RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS,
-    RQ_BINDING_SCENE, TRACE_BINDINGS, TRACE_WORKGROUP_SIZE,
+    RQ_BINDING_SCENE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH,
+    TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
 use crate::gpu::{
-    check_range, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps,
+    check_range, in_order, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps,
 };
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{Counters, Traversal, Variant};
@@ -383,15 +384,15 @@ impl TracePipelines {
             },
         };
         let spec = |pass: u32| {
-            [
-                key.variant.id(),
-                counters as u32,
-                key.stack_size,
-                key.any_hit as u32,
-                key.packet_width,
-                key.robust as u32,
-                pass,
-            ]
+            in_order::<_, { TRACE_SPECS as usize }>([
+                (TRACE_SPEC_VARIANT, key.variant.id()),
+                (TRACE_SPEC_COUNTERS, counters as u32),
+                (TRACE_SPEC_STACK_SIZE, key.stack_size),
+                (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
+                (TRACE_SPEC_PACKET_WIDTH, key.packet_width),
+                (TRACE_SPEC_ROBUST, key.robust as u32),
+                (TRACE_SPEC_PASS, pass),
+            ])
         };
         let kernels = if key.robust && !key.uses_packets() {
             // Robust single rays: the fast and the careful pass, compiled side by side.

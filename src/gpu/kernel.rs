@@ -460,6 +460,18 @@ impl BufferSet {
     }
 }
 
+/// The entries of a descriptor set (buffers in binding order) or of a kernel's
+/// specialization constants (values in id order), from `(binding or id, entry)`
+/// pairs in any order; each of `0..N` exactly once.
+pub fn in_order<T: Copy, const N: usize>(entries: [(u32, T); N]) -> [T; N] {
+    let mut out: [Option<T>; N] = [None; N];
+    for (index, entry) in entries {
+        let slot = &mut out[index as usize];
+        assert!(slot.replace(entry).is_none(), "binding or id {index} given twice");
+    }
+    out.map(|e| e.expect("every binding or id given"))
+}
+
 /// Checks a texel-buffer range (viewed as `format`) against the device's limits.
 /// Texel-buffer ranges must start at offset 0 (kdtrace binds its scene buffers whole).
 pub(crate) fn check_texel_range(ctx: &GpuContext, what: &str, r: &BufferRange, format: vk::Format) -> Result<()> {

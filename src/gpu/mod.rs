@@ -15,7 +15,7 @@ pub use context::{
     RAY_QUERY_EXTENSIONS,
 };
 pub(crate) use kernel::check_range;
-pub use kernel::{Binding, BufferSet, Kernel, KernelDesc, Timestamps};
+pub use kernel::{in_order, Binding, BufferSet, Kernel, KernelDesc, Timestamps};
 pub use raster::{RasterView, Rasterizer};
 
 /// SPIR-V of the kernels in `glsl/`, compiled by build.rs, and the GLSL header

@@ -1,13 +1,14 @@
 //! The renderer's side of its contract with its kernels: the push constants
 //! and the std430 structs of the scene buffers and ray queues (`structs.rs`,
 //! whose GLSL declarations build.rs generates), the sizes of the other buffer
-//! elements, and the ordering of bindings and specialization constants. The
+//! elements. The
 //! constants (material flags, counter indices, jitter modes, bindings) are in
 //! `consts.rs`, which build.rs passes to the kernels as `#define`s.
 
 pub use super::structs::RenderParams;
 pub(super) use super::structs::{Emitter, GpuLight, GpuMaterial, GpuPath, Surface};
 use crate::geom::{Hit, Ray};
+pub(super) use crate::gpu::in_order;
 
 /// Bytes of a ray of a queue (std430 `Ray`).
 pub(super) const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
@@ -22,18 +23,6 @@ pub(super) const ACCUM_BYTES: u64 = std::mem::size_of::<[f32; 4]>() as u64;
 pub(super) const SPAN_BYTES: u64 = std::mem::size_of::<[u32; 2]>() as u64;
 /// Bytes of a render counter (`uint`).
 pub(super) const COUNTER_BYTES: u64 = std::mem::size_of::<u32>() as u64;
-
-/// The entries of a descriptor set (buffers in binding order) or of a kernel's
-/// specialization constants (values in id order), from `(binding or id, entry)`
-/// pairs in any order; each of `0..N` exactly once.
-pub(super) fn in_order<T: Copy, const N: usize>(entries: [(u32, T); N]) -> [T; N] {
-    let mut out: [Option<T>; N] = [None; N];
-    for (index, entry) in entries {
-        let slot = &mut out[index as usize];
-        assert!(slot.replace(entry).is_none(), "binding or id {index} given twice");
-    }
-    out.map(|e| e.expect("every binding or id given"))
-}
 
 #[cfg(test)]
 mod tests {
