@@ -180,7 +180,8 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
     let surface_bytes: &[u8] = bytemuck::cast_slice(&surface_data);
     let surface_buf = resources.buffer(surface_bytes.len() as u64, storage, MemoryLocation::CpuToGpu, "surfaces")?;
     resources.write(surface_buf, surface_bytes)?;
-    let pixel_buf = resources.buffer(u64::from(count) * 4, storage, MemoryLocation::GpuToCpu, "pixels")?;
+    let pixel_bytes = u64::from(count) * std::mem::size_of::<u32>() as u64;
+    let pixel_buf = resources.buffer(pixel_bytes, storage, MemoryLocation::GpuToCpu, "pixels")?;
 
     // The engine's pipelines and descriptor sets.
     let raygen = resources.pipeline(
@@ -191,7 +192,7 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
     let shade =
         resources.pipeline(shaders::EXAMPLE_SHADE, ENGINE_SHADE_BINDINGS, std::mem::size_of::<ShadeParams>() as u32)?;
     let [raygen_set, shade_set] = resources.descriptor_sets([raygen.set_layout, shade.set_layout])?;
-    let pixels = BufferRange::new(pixel_buf, 0, u64::from(count) * 4);
+    let pixels = BufferRange::new(pixel_buf, 0, pixel_bytes);
     let surfaces_range = BufferRange::new(surface_buf, 0, surface_bytes.len() as u64);
     resources.write_set(raygen_set, &[(ENGINE_RAYGEN_BINDING_RAYS, rays)]);
     resources.write_set(

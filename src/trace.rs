@@ -174,7 +174,9 @@ const DEFAULT_CHUNK: usize = 1 << 20;
 /// Bytes of one ray, one hit and one ray's counters in the kernel's buffers.
 const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
 const HIT_BYTES: u64 = std::mem::size_of::<Hit>() as u64;
-const COUNTER_BYTES: u64 = COUNTERS_PER_RAY as u64 * 4;
+const COUNTER_BYTES: u64 = COUNTERS_PER_RAY as u64 * WORD_BYTES;
+/// Bytes of a `uint` of the counters and the careful-pass list.
+const WORD_BYTES: u64 = std::mem::size_of::<u32>() as u64;
 
 /// How a [`Tracer`] finds hits. A tracer holds its scene in one backend's
 /// acceleration structure, chosen when it is made ([`Tracer::with_backend`]).
@@ -779,7 +781,7 @@ impl Tracer {
         let k = &self.pipelines.kernels[kernel].1;
         let careful = match k.careful {
             Some(_) => {
-                let bytes = (CAREFUL_HEADER_WORDS as u64 + capacity as u64) * 4;
+                let bytes = (CAREFUL_HEADER_WORDS as u64 + capacity as u64) * WORD_BYTES;
                 let usage = vk::BufferUsageFlags::STORAGE_BUFFER
                     | vk::BufferUsageFlags::INDIRECT_BUFFER
                     | vk::BufferUsageFlags::TRANSFER_DST;

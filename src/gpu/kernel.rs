@@ -141,7 +141,11 @@ impl Kernel {
                 }
             };
             let entries: Vec<vk::SpecializationMapEntry> = (0..desc.spec_constants.len())
-                .map(|i| vk::SpecializationMapEntry { constant_id: i as u32, offset: 4 * i as u32, size: 4 })
+                .map(|i| vk::SpecializationMapEntry {
+                    constant_id: i as u32,
+                    offset: (i * std::mem::size_of::<u32>()) as u32,
+                    size: std::mem::size_of::<u32>(),
+                })
                 .collect();
             let data: &[u8] = bytemuck::cast_slice(desc.spec_constants);
             let spec = vk::SpecializationInfo::default().map_entries(&entries).data(data);

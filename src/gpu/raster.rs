@@ -342,9 +342,9 @@ impl Rasterizer {
         vk::Extent2D { width: self.width, height: self.height }
     }
 
-    /// Bytes of the visibility buffer [`Rasterizer::record`] fills (4 per pixel).
+    /// Bytes of the visibility buffer [`Rasterizer::record`] fills (a `uint` per pixel).
     pub fn visibility_bytes(&self) -> u64 {
-        u64::from(self.width) * u64::from(self.height) * 4
+        u64::from(self.width) * u64::from(self.height) * std::mem::size_of::<u32>() as u64
     }
 
     /// Records the draw of the visibility buffer seen through `view`, then its

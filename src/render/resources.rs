@@ -72,11 +72,13 @@ impl Chunking {
             )));
         }
         let shadow_per_path = u64::from(plan.shadow_per_vertex);
+        // A queue entry is a ray and a path (a shadow ray's weight takes a path slot).
+        let (entry_bytes, largest) = (RAY_BYTES + PATH_BYTES, RAY_BYTES.max(PATH_BYTES));
         let chunk = pixel_count
             .min(1 << 20)
-            .min(limit / 32)
-            .min((SHADOW_QUEUE_BYTES / (64 * shadow_per_path)).max(1024))
-            .min(limit / (32 * shadow_per_path))
+            .min(limit / largest)
+            .min((SHADOW_QUEUE_BYTES / (entry_bytes * shadow_per_path)).max(1024))
+            .min(limit / (largest * shadow_per_path))
             .max(1);
         Ok(Chunking { pixel_count, chunk, shadow_capacity: chunk * shadow_per_path })
     }
