@@ -9,8 +9,7 @@
 //! The scene goes to the driver as a triangle soup of the triangles that can be
 //! hit (the kd-tree builder's [`is_skipped`] ones, degenerate or non-finite, are
 //! left out), sorted by the Morton code of their centroids: the driver's BVH
-//! quality depends on the order it gets (measured on lavapipe, Mesa 25: bunny
-//! camera rays 100× faster sorted than in file order). A `u32` per triangle maps
+//! quality depends on the order it gets (docs/ACCURACY.md). A `u32` per triangle maps
 //! the driver's primitive index back to the scene's, applied by the kernel
 //! (`glsl/trace_ray_query.comp`) when it writes a hit.
 

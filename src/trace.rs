@@ -438,9 +438,9 @@ impl TracePipelines {
 
 /// The pipelines of one traversal and counter setting: one pass, or for robust
 /// single rays a fast pass and a careful pass over the rays the fast one listed
-/// (dispatched indirectly). On SIMD drivers such as lavapipe, which run every
-/// branch of a kernel under a mask, one kernel holding both traces paid for the
-/// careful one in every subgroup; two kernels pay for it only where rays need it.
+/// (dispatched indirectly). On SIMD drivers, which run every branch of a kernel
+/// under a mask, one kernel holding both traces would pay for the careful one
+/// in every subgroup; two kernels pay for it only where rays need it.
 struct TraceKernels {
     main: Kernel,
     careful: Option<Kernel>,

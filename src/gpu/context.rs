@@ -577,9 +577,9 @@ impl GpuContext {
         }))
     }
 
-    /// True when GPU timestamps of this context cannot be trusted: on lavapipe
-    /// (Mesa 22.3), once a draw has run, later timestamps no longer advance with
-    /// the work. Timing code reports no GPU time then.
+    /// True when GPU timestamps of this context cannot be trusted: on lavapipe,
+    /// once a draw has run, later timestamps no longer advance with the work
+    /// (docs/RENDERING.md). Timing code reports no GPU time then.
     pub fn timestamps_unreliable(&self) -> bool {
         self.drew.load(std::sync::atomic::Ordering::Relaxed) && self.info.name.contains("llvmpipe")
     }

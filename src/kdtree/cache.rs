@@ -250,7 +250,7 @@ pub struct CacheKey {
 
 impl CacheKey {
     /// The key of `triangles` built with `config`. Hashes the triangles in
-    /// parallel: a few milliseconds for a million triangles.
+    /// parallel (its cost beside a build's: docs/BUILDER.md).
     pub fn new(triangles: &[[Vec3; 3]], config: &BuildConfig) -> CacheKey {
         CacheKey {
             triangles: hash64(bytemuck::cast_slice(triangles)),

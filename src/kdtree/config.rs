@@ -106,17 +106,17 @@ impl BuildConfig {
         builder: Builder::Sweep,
     };
 
-    /// The default, chosen by measurement (docs/BUILDER.md): Wald & Havran's
-    /// termination with a costlier traversal step and a smaller empty bonus,
-    /// `K_T = 30, K_I = 20, b = 0.1`. The node visits plus triangle tests per
-    /// ray of the configurations between Wald & Havran's and twice their `K_T`
-    /// lie within about 1 % of each other on the shared scenes (pbrt-v3's are
-    /// 26 % higher); this one is on that plateau with the fewest nodes (less
-    /// than half of Wald & Havran's), so it builds fastest and takes least memory.
-    /// Its splits are binned on the nodes of 4096 triangles or more
-    /// ([`Builder::BINNED`]), which builds faster at the same node visits plus
-    /// triangle tests per ray (within 1.1 %, docs/BUILDER.md); set `builder`
-    /// to [`Builder::Sweep`] for the exact sweep everywhere.
+    /// The default, chosen by measurement (docs/BUILDER.md has the numbers and
+    /// the commands): Wald & Havran's termination with a costlier traversal
+    /// step and a smaller empty bonus, `K_T = 30, K_I = 20, b = 0.1`. The node
+    /// visits plus triangle tests per ray are nearly flat between Wald &
+    /// Havran's `K_T` and about twice it (pbrt-v3's costs are well above); of
+    /// the configurations on that plateau this one has the fewest nodes, so it
+    /// builds fastest and takes least memory. Its splits are binned on the
+    /// nodes of 4096 triangles or more ([`Builder::BINNED`]), which builds
+    /// faster at the same node visits plus triangle tests per ray within the
+    /// bound docs/BUILDER.md checks; set `builder` to [`Builder::Sweep`] for the
+    /// exact sweep everywhere.
     pub const TUNED: BuildConfig = BuildConfig {
         traversal_cost: 30.0,
         intersection_cost: 20.0,

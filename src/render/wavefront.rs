@@ -128,8 +128,8 @@ pub fn render_progressive(
     frame.copy_image()?;
     let Frame { mut stats, times, first_hits, .. } = frame;
     stats.render_seconds = loop_start.elapsed().as_secs_f64();
-    // lavapipe's timestamps stop advancing once a draw has run (and the first
-    // submission with a draw is the only one whose times hold): no GPU times then.
+    // No GPU times where timestamps stop advancing once a draw has run
+    // (`GpuContext::timestamps_unreliable`).
     if res.timestamps.is_some() && !ctx.timestamps_unreliable() {
         stats.trace_seconds = Some(times[Kind::Trace as usize]);
         stats.shade_seconds = Some(times[Kind::Shade as usize]);
