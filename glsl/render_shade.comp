@@ -57,6 +57,170 @@ uint pick_emitter(float u) {
     return lo;
 }
 
+// The shading point of a hit and what every part of its shading reads.
+struct Vertex {
+    vec3 x;          // the hit point
+    vec3 ng;         // unit geometric normal, as the triangle winds
+    vec3 n;          // ng on the side the ray arrived from
+    vec3 wo;         // unit direction back along the ray
+    vec3 origin;     // x moved off the surface, for the rays that leave it
+    vec3 thr;        // the path's throughput
+    Material m;
+    bool diffuse;
+    bool glossy;
+    bool mirror;
+    uint base;       // this vertex's first dimension pair
+};
+
+// The BRDF at v toward the unit direction wi: the diffuse lobe and the
+// normalized Phong lobe of glossy materials.
+vec3 brdf(Vertex v, vec3 wi) {
+    vec3 f = v.diffuse ? v.m.kd.xyz / PI : vec3(0.0);
+    if (v.glossy) f += v.m.ks.xyz * ((v.m.kd.w + 2.0) / (2.0 * PI)) * pow(max(dot(reflect(-wi, v.n), v.wo), 0.0), v.m.kd.w);
+    return f;
+}
+
+// What the path finds emitted at v (an emissive material): all of it for camera
+// and mirror rays; for a diffuse bounce, which next-event estimation could also
+// have sampled, the share the power heuristic (Veach 1997) gives the bounce.
+// `ray_length`: the length of the ray's direction, so hit.t * ray_length is the distance.
+vec3 emission(Vertex v, Path path, float t, float ray_length) {
+    if ((path.flags & PATH_COUNT_EMISSION) != 0u) {
+        return v.thr * v.m.ke.xyz;
+    } else if (AREA_LIGHTS && (path.flags & PATH_MIS) != 0u) {
+        float d = t * ray_length;
+        float cos_y = max(abs(dot(v.ng, v.wo)), 1e-12);
+        float p_light = max(luminance(v.m.ke.xyz), 1e-6) / p.forward.w * d * d / cos_y;
+        float p_bsdf = uintBitsToFloat(path.pad);
+        return v.thr * v.m.ke.xyz * (p_bsdf * p_bsdf / (p_bsdf * p_bsdf + p_light * p_light));
+    }
+    return vec3(0.0);
+}
+
+// One next-event-estimation sample of the emitters from v: `weight`, the
+// radiance it brings if unoccluded (0 when none), MIS-weighted against the
+// diffuse bounce taken with probability bounce_share; `target`, the sampled
+// point moved off its emitter.
+void sample_area_light(Vertex v, Path path, float bounce_share, out vec3 weight, out vec3 target) {
+    weight = vec3(0.0);
+    target = vec3(0.0);
+    vec2 u = ld2(path.pixel, p.sample_index, v.base, p.seed);
+    vec2 w = ld2(path.pixel, p.sample_index, v.base + 1u, p.seed);
+    Emitter e = emitters[pick_emitter(u.x)];
+    Surface es = surfaces[e.prim];
+    float su = sqrt(w.x);
+    float c0 = 1.0 - su;
+    float c1 = w.y * su;
+    vec3 y = c0 * es.v0.xyz + c1 * es.v1.xyz + (1.0 - c0 - c1) * es.v2.xyz;
+    vec3 ny = normalize(cross(es.v1.xyz - es.v0.xyz, es.v2.xyz - es.v0.xyz));
+    vec3 d = y - v.x;
+    float dist2 = dot(d, d);
+    vec3 wi = d * inversesqrt(dist2);
+    float cos_x = dot(v.n, wi);
+    float cos_y = abs(dot(ny, wi));
+    if (dist2 > 0.0 && cos_x > 0.0 && cos_y > 0.0 && e.pick > 0.0) {
+        vec3 f = brdf(v, wi);
+        vec3 ke = materials[floatBitsToUint(es.v0.w)].ke.xyz;
+        // The power heuristic against the diffuse bounce's cosine sampling,
+        // when this vertex bounces (else the light sample takes it all).
+        float p_light = e.pick / e.area * dist2 / cos_y;
+        float p_bsdf = bounce_share * cos_x / PI;
+        float mis = p_light * p_light / (p_light * p_light + p_bsdf * p_bsdf);
+        weight = v.thr * f * ke * (cos_x * cos_y / dist2) * (e.area / e.pick) * mis;
+        vec3 escale = triangle_scale(es.v0.xyz, es.v1.xyz, es.v2.xyz);
+        target = offset_origin(y, dot(ny, wi) > 0.0 ? -ny : ny, escale);
+    }
+}
+
+// Appends the path's next ray from v to the next queue: a mirror reflection
+// with probability p_mirror, else a diffuse bounce (probability bounce_share)
+// when can_bounce; `gather_ao`: v gathered ambient occlusion.
+void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool can_bounce, bool gather_ao) {
+    vec2 u = ld2(path.pixel, p.sample_index, v.base, p.seed);
+    Path next = path;
+    next.depth = path.depth + 1u;
+    vec3 dir = vec3(0.0);
+    bool go = false;
+    if (v.mirror && u.y < p_mirror) {
+        dir = reflect(-v.wo, v.n);
+        next.throughput = v.thr * v.m.ks.xyz / p_mirror;
+        next.flags = PATH_COUNT_EMISSION | (path.flags & PATH_AO_DONE) | (gather_ao ? PATH_AO_DONE : 0u);
+        go = true;
+    } else if (can_bounce) {
+        dir = cosine_direction(v.n, ld2(path.pixel, p.sample_index, v.base + 2u, p.seed));
+        next.throughput = v.thr * v.m.kd.xyz / bounce_share;
+        next.flags = PATH_AO_DONE | (AREA_LIGHTS ? PATH_MIS : 0u);
+        next.pad = floatBitsToUint(bounce_share * max(dot(v.n, dir), 0.0) / PI);
+        next.diffuse = path.diffuse + 1u;
+        go = true;
+    }
+    if (go && luminance(next.throughput) > 0.0) {
+        uint slot = atomicAdd(counters[RC_NEXT], 1u);
+        rays_next[slot] = Ray(v.origin, 0.0, dir, INF);
+        paths_next[slot] = next;
+    }
+}
+
+// The shading point of `hit` on its triangle for a path whose ray has direction `dir`.
+Vertex vertex_at(Hit hit, Path path, vec3 dir) {
+    Surface s = surfaces[hit.prim_id];
+    Vertex v;
+    v.m = materials[floatBitsToUint(s.v0.w)];
+    uint mat = floatBitsToUint(v.m.ks.w);
+    v.wo = -normalize(dir);
+    v.ng = normalize(cross(s.v1.xyz - s.v0.xyz, s.v2.xyz - s.v0.xyz));
+    v.n = dot(v.ng, v.wo) < 0.0 ? -v.ng : v.ng;
+    float b0 = 1.0 - hit.u - hit.v;
+    v.x = b0 * s.v0.xyz + hit.u * s.v1.xyz + hit.v * s.v2.xyz;
+    vec3 scale = triangle_scale(s.v0.xyz, s.v1.xyz, s.v2.xyz);
+    v.origin = offset_origin(v.x, v.n, scale);
+    v.thr = path.throughput;
+    v.diffuse = (mat & MAT_DIFFUSE) != 0u;
+    v.glossy = GLOSSY && (mat & MAT_GLOSSY) != 0u;
+    v.mirror = MIRRORS && (mat & MAT_MIRROR) != 0u;
+    v.base = 1u + 4u * path.depth;
+    return v;
+}
+
+// Writes the shadow rays of v and their weights from slot `first` on, in the
+// order main counted them: the area-light sample, the point lights facing v,
+// the eye light's visibility ray, the ambient-occlusion rays.
+void write_shadow_rays(uint first, Vertex v, Path path, vec3 area_weight, vec3 area_target, bool lit, bool head_ray,
+                       vec3 head, bool gather_ao) {
+    uint k = first;
+    if (luminance(area_weight) > 0.0) {
+        shadow_rays[k] = Ray(v.origin, 0.0, area_target - v.origin, 1.0);
+        shadow_weights[k] = vec4(area_weight, 0.0);
+        k++;
+    }
+    if (POINT_LIGHTS && lit) {
+        for (uint l = 0u; l < p.light_count; l++) {
+            vec3 d = lights[l].position.xyz - v.x;
+            if (dot(v.n, d) <= 0.0) continue;
+            float dist2 = dot(d, d);
+            vec3 wi = d * inversesqrt(dist2);
+            vec3 f = brdf(v, wi);
+            shadow_rays[k] = Ray(v.origin, 0.0, lights[l].position.xyz - v.origin, 1.0);
+            shadow_weights[k] = vec4(v.thr * f * lights[l].intensity.xyz * (dot(v.n, wi) / dist2), 0.0);
+            k++;
+        }
+    }
+    if (head_ray) {
+        shadow_rays[k] = Ray(v.origin, 0.0, p.eye.xyz - v.origin, 1.0);
+        shadow_weights[k] = vec4(head, 0.0);
+        k++;
+    }
+    if (gather_ao) {
+        vec3 weight = v.thr * v.m.kd.xyz * (p.background.w / float(p.ao_samples));
+        for (uint a = 0u; a < p.ao_samples; a++) {
+            vec2 u = ld2(path.pixel, p.sample_index * p.ao_samples + a, v.base + 3u, p.seed);
+            shadow_rays[k] = Ray(v.origin, 0.0, cosine_direction(v.n, u) * p.ao_radius, 1.0);
+            shadow_weights[k] = vec4(weight, 0.0);
+            k++;
+        }
+    }
+}
+
 void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= p.count) return;
@@ -74,96 +238,45 @@ void main() {
         return;
     }
 
-    Surface s = surfaces[hit.prim_id];
-    Material m = materials[floatBitsToUint(s.v0.w)];
-    uint mat = floatBitsToUint(m.ks.w);
-    vec3 wo = -normalize(rays_in[i].dir);
-    vec3 ng = normalize(cross(s.v1.xyz - s.v0.xyz, s.v2.xyz - s.v0.xyz));
-    vec3 n = dot(ng, wo) < 0.0 ? -ng : ng;   // the side the ray arrived from
-    float b0 = 1.0 - hit.u - hit.v;
-    vec3 x = b0 * s.v0.xyz + hit.u * s.v1.xyz + hit.v * s.v2.xyz;
-    vec3 scale = triangle_scale(s.v0.xyz, s.v1.xyz, s.v2.xyz);
-    vec3 origin = offset_origin(x, n, scale);
-    vec3 thr = path.throughput;
-    bool diffuse = (mat & MAT_DIFFUSE) != 0u;
-    bool glossy = GLOSSY && (mat & MAT_GLOSSY) != 0u;
-    bool mirror = MIRRORS && (mat & MAT_MIRROR) != 0u;
-    uint base = 1u + 4u * path.depth;   // this vertex's dimension pairs
+    Vertex v = vertex_at(hit, path, rays_in[i].dir);
+    uint mat = floatBitsToUint(v.m.ks.w);
 
     // How the path goes on from here: a mirror reflection with probability
     // p_mirror, else a diffuse bounce when allowed (probability bounce_share).
     bool continues = CONTINUE && path.depth + 1u < p.max_depth;
-    bool can_bounce = continues && BOUNCES && !HEADLIGHT && diffuse && path.diffuse < p.bounces;
+    bool can_bounce = continues && BOUNCES && !HEADLIGHT && v.diffuse && path.diffuse < p.bounces;
     float p_mirror = 0.0;
-    if (mirror && continues) {
-        float lm = luminance(m.ks.xyz);
-        float ld = can_bounce ? luminance(m.kd.xyz) : 0.0;
+    if (v.mirror && continues) {
+        float lm = luminance(v.m.ks.xyz);
+        float ld = can_bounce ? luminance(v.m.kd.xyz) : 0.0;
         p_mirror = lm + ld > 0.0 ? lm / (lm + ld) : 0.0;
     }
     float bounce_share = can_bounce ? 1.0 - p_mirror : 0.0;
 
     vec3 L = vec3(0.0);
-    if ((mat & MAT_EMISSIVE) != 0u) {
-        if ((path.flags & PATH_COUNT_EMISSION) != 0u) {
-            L += thr * m.ke.xyz;
-        } else if (AREA_LIGHTS && (path.flags & PATH_MIS) != 0u) {
-            // A diffuse bounce found an emitter that next-event estimation could
-            // also have sampled: the power heuristic (Veach 1997) weighs the two.
-            float d = hit.t * length(rays_in[i].dir);
-            float cos_y = max(abs(dot(ng, wo)), 1e-12);
-            float p_light = max(luminance(m.ke.xyz), 1e-6) / p.forward.w * d * d / cos_y;
-            float p_bsdf = uintBitsToFloat(path.pad);
-            L += thr * m.ke.xyz * (p_bsdf * p_bsdf / (p_bsdf * p_bsdf + p_light * p_light));
-        }
-    }
+    if ((mat & MAT_EMISSIVE) != 0u) L += emission(v, path, hit.t, length(rays_in[i].dir));
     // The eye light shades without shadows. At a camera hit the camera ray
-    // proves the eye sees x; HEADLIGHT_SHADOWS traces that visibility anyway
+    // proves the eye sees v.x; HEADLIGHT_SHADOWS traces that visibility anyway
     // (--no-skip), to measure what skipping it saves.
-    vec3 head = (HEADLIGHT && diffuse) ? thr * m.kd.xyz * (0.1 + 0.9 * max(dot(n, wo), 0.0)) : vec3(0.0);
+    vec3 head = (HEADLIGHT && v.diffuse) ? v.thr * v.m.kd.xyz * (0.1 + 0.9 * max(dot(v.n, v.wo), 0.0)) : vec3(0.0);
     bool head_ray = HEADLIGHT && HEADLIGHT_SHADOWS && path.depth == 0u && luminance(head) > 0.0;
     if (HEADLIGHT && !head_ray) L += head;
 
     // Shadow rays: count them, reserve a contiguous span, then write them.
     uint shadow_count = 0u;
-    bool lit = !HEADLIGHT && (diffuse || glossy);
+    bool lit = !HEADLIGHT && (v.diffuse || v.glossy);
     vec3 area_weight = vec3(0.0);
     vec3 area_target = vec3(0.0);
     if (AREA_LIGHTS && lit && p.emitter_count > 0u) {
-        vec2 u = ld2(path.pixel, p.sample_index, base, p.seed);
-        vec2 v = ld2(path.pixel, p.sample_index, base + 1u, p.seed);
-        Emitter e = emitters[pick_emitter(u.x)];
-        Surface es = surfaces[e.prim];
-        float su = sqrt(v.x);
-        float c0 = 1.0 - su;
-        float c1 = v.y * su;
-        vec3 y = c0 * es.v0.xyz + c1 * es.v1.xyz + (1.0 - c0 - c1) * es.v2.xyz;
-        vec3 ny = normalize(cross(es.v1.xyz - es.v0.xyz, es.v2.xyz - es.v0.xyz));
-        vec3 d = y - x;
-        float dist2 = dot(d, d);
-        vec3 wi = d * inversesqrt(dist2);
-        float cos_x = dot(n, wi);
-        float cos_y = abs(dot(ny, wi));
-        if (dist2 > 0.0 && cos_x > 0.0 && cos_y > 0.0 && e.pick > 0.0) {
-            vec3 f = diffuse ? m.kd.xyz / PI : vec3(0.0);
-            if (glossy) f += m.ks.xyz * ((m.kd.w + 2.0) / (2.0 * PI)) * pow(max(dot(reflect(-wi, n), wo), 0.0), m.kd.w);
-            vec3 ke = materials[floatBitsToUint(es.v0.w)].ke.xyz;
-            // The power heuristic against the diffuse bounce's cosine sampling,
-            // when this vertex bounces (else the light sample takes it all).
-            float p_light = e.pick / e.area * dist2 / cos_y;
-            float p_bsdf = bounce_share * cos_x / PI;
-            float mis = p_light * p_light / (p_light * p_light + p_bsdf * p_bsdf);
-            area_weight = thr * f * ke * (cos_x * cos_y / dist2) * (e.area / e.pick) * mis;
-            vec3 escale = triangle_scale(es.v0.xyz, es.v1.xyz, es.v2.xyz);
-            area_target = offset_origin(y, dot(ny, wi) > 0.0 ? -ny : ny, escale);
-            if (luminance(area_weight) > 0.0) shadow_count++;
-        }
+        sample_area_light(v, path, bounce_share, area_weight, area_target);
+        if (luminance(area_weight) > 0.0) shadow_count++;
     }
     if (POINT_LIGHTS && lit) {
         for (uint l = 0u; l < p.light_count; l++) {
-            if (dot(n, lights[l].position.xyz - x) > 0.0) shadow_count++;
+            if (dot(v.n, lights[l].position.xyz - v.x) > 0.0) shadow_count++;
         }
     }
-    bool gather_ao = AO && diffuse && !HEADLIGHT && (path.flags & PATH_AO_DONE) == 0u;
+    bool gather_ao = AO && v.diffuse && !HEADLIGHT && (path.flags & PATH_AO_DONE) == 0u;
     if (gather_ao) shadow_count += p.ao_samples;
     if (head_ray) shadow_count++;
 
@@ -173,68 +286,12 @@ void main() {
             atomicAdd(counters[RC_OVERFLOW], shadow_count);
         } else {
             spans[i] = uvec2(first, shadow_count);
-            uint k = first;
-            if (luminance(area_weight) > 0.0) {
-                shadow_rays[k] = Ray(origin, 0.0, area_target - origin, 1.0);
-                shadow_weights[k] = vec4(area_weight, 0.0);
-                k++;
-            }
-            if (POINT_LIGHTS && lit) {
-                for (uint l = 0u; l < p.light_count; l++) {
-                    vec3 d = lights[l].position.xyz - x;
-                    if (dot(n, d) <= 0.0) continue;
-                    float dist2 = dot(d, d);
-                    vec3 wi = d * inversesqrt(dist2);
-                    vec3 f = diffuse ? m.kd.xyz / PI : vec3(0.0);
-                    if (glossy) f += m.ks.xyz * ((m.kd.w + 2.0) / (2.0 * PI)) * pow(max(dot(reflect(-wi, n), wo), 0.0), m.kd.w);
-                    shadow_rays[k] = Ray(origin, 0.0, lights[l].position.xyz - origin, 1.0);
-                    shadow_weights[k] = vec4(thr * f * lights[l].intensity.xyz * (dot(n, wi) / dist2), 0.0);
-                    k++;
-                }
-            }
-            if (head_ray) {
-                shadow_rays[k] = Ray(origin, 0.0, p.eye.xyz - origin, 1.0);
-                shadow_weights[k] = vec4(head, 0.0);
-                k++;
-            }
-            if (gather_ao) {
-                vec3 weight = thr * m.kd.xyz * (p.background.w / float(p.ao_samples));
-                for (uint a = 0u; a < p.ao_samples; a++) {
-                    vec2 u = ld2(path.pixel, p.sample_index * p.ao_samples + a, base + 3u, p.seed);
-                    shadow_rays[k] = Ray(origin, 0.0, cosine_direction(n, u) * p.ao_radius, 1.0);
-                    shadow_weights[k] = vec4(weight, 0.0);
-                    k++;
-                }
-            }
+            write_shadow_rays(first, v, path, area_weight, area_target, lit, head_ray, head, gather_ao);
         }
     }
 
     // The path's next ray: a mirror reflection or a diffuse bounce.
-    if (continues) {
-        vec2 u = ld2(path.pixel, p.sample_index, base, p.seed);
-        Path next = path;
-        next.depth = path.depth + 1u;
-        vec3 dir = vec3(0.0);
-        bool go = false;
-        if (mirror && u.y < p_mirror) {
-            dir = reflect(-wo, n);
-            next.throughput = thr * m.ks.xyz / p_mirror;
-            next.flags = PATH_COUNT_EMISSION | (path.flags & PATH_AO_DONE) | (gather_ao ? PATH_AO_DONE : 0u);
-            go = true;
-        } else if (can_bounce) {
-            dir = cosine_direction(n, ld2(path.pixel, p.sample_index, base + 2u, p.seed));
-            next.throughput = thr * m.kd.xyz / bounce_share;
-            next.flags = PATH_AO_DONE | (AREA_LIGHTS ? PATH_MIS : 0u);
-            next.pad = floatBitsToUint(bounce_share * max(dot(n, dir), 0.0) / PI);
-            next.diffuse = path.diffuse + 1u;
-            go = true;
-        }
-        if (go && luminance(next.throughput) > 0.0) {
-            uint slot = atomicAdd(counters[RC_NEXT], 1u);
-            rays_next[slot] = Ray(origin, 0.0, dir, INF);
-            paths_next[slot] = next;
-        }
-    }
+    if (continues) continue_path(v, path, p_mirror, bounce_share, can_bounce, gather_ao);
 
     accum[path.pixel] += vec4(L, 0.0);
 }
