@@ -28,14 +28,15 @@ pub const ENGINE_SHADE_BINDING_PIXELS: u32 = 3;
 /// Number of bindings of `shade.comp`.
 pub const ENGINE_SHADE_BINDINGS: u32 = 4;
 
-// Descriptor bindings of `layout_probe.comp` (tests/embed.rs).
+// Descriptor bindings of `layout_probe.comp` (tests/layout.rs).
 /// Element 1 of a `ShadeParams` buffer.
 pub const ENGINE_PROBE_BINDING_SHADE_PARAMS: u32 = 0;
 /// Element 1 of a `Surface` buffer.
 pub const ENGINE_PROBE_BINDING_SURFACES: u32 = 1;
 /// The words written back.
 pub const ENGINE_PROBE_BINDING_WORDS: u32 = 2;
-/// Number of bindings of `layout_probe.comp`.
+/// Number of bindings of `layout_probe.comp` (read by tests/layout.rs only).
+#[allow(dead_code)]
 pub const ENGINE_PROBE_BINDINGS: u32 = 3;
 
 gpu_struct! {
