@@ -99,7 +99,8 @@
 //!
 //! # Rays and hits for shader authors
 //!
-//! Rays and hits are std430 structs, mirrored by [`Ray`] and [`Hit`] (both `Pod`):
+//! Rays and hits are std430 structs, defined once as [`Ray`] and [`Hit`] (both
+//! `Pod`), from which `build.rs` generates their GLSL declarations:
 //!
 //! | `Ray`, 32 bytes | offset | GLSL | |
 //! |---|---|---|---|
@@ -115,9 +116,8 @@
 //! | `u` | 8 | `float` | barycentrics: the hit point is `(1-u-v)·v0 + u·v1 + v·v2` |
 //! | `v` | 12 | `float` | |
 //!
-//! The GLSL header is `glsl/shared/ray.glsl`; [`gpu::shaders::HEADER`] holds it as a
-//! self-contained `kdtrace.glsl`, with the special `prim_id`s and counter indices
-//! as `#define`s. Write it into your shader include path and
+//! [`gpu::shaders::HEADER`] holds those declarations as a self-contained
+//! `kdtrace.glsl`, with the special `prim_id`s and counter indices as `#define`s. Write it into your shader include path and
 //! `#include "kdtrace.glsl"`, then declare e.g.
 //! `layout(std430, binding = 0) buffer Hits { Hit hits[]; };`.
 //!

@@ -23,7 +23,7 @@ pub use raster::{RasterView, Rasterizer};
 ///
 /// - `TRACE`, `LAYOUT_PROBE`: the library's kernels (`glsl/*.comp`).
 /// - [`HEADER`](shaders::HEADER): `kdtrace.glsl`, a self-contained GLSL header with
-///   the std430 `Ray` and `Hit` structs (`glsl/shared/ray.glsl`) and the special
+///   the std430 `Ray` and `Hit` structs (generated from [`crate::Ray`] and [`crate::Hit`]) and the special
 ///   `prim_id`s and counter indices of [`crate::consts`] as `#define`s. Write it
 ///   into your shader include path and `#include "kdtrace.glsl"`.
 /// - `EXAMPLE_*`: the shaders of `examples/embed.rs` (`glsl/examples/*.comp`),

@@ -20,8 +20,9 @@
 //! The code follows a render's life: [`RenderSettings`] (`settings.rs`) and
 //! [`RenderPlan`] (`plan.rs`) decide what to do; `resources.rs` builds it once
 //! (kernels, buffers, descriptor sets, trace bindings); `passes.rs` records the
-//! submissions of each sample; `output.rs` reads the image back. `abi.rs` holds
-//! the structs and constants shared with `render.glsl`, `sample.rs` the host
+//! submissions of each sample; `output.rs` reads the image back. `structs.rs` defines
+//! the structs shared with the kernels (build.rs generates their GLSL), `abi.rs`
+//! the sizes of the other buffer elements, `consts.rs` the shared constants, `sample.rs` the host
 //! twin of its sample sequence. This file runs the sample loop.
 
 use std::time::Instant;
