@@ -271,22 +271,19 @@ pub fn plot_images(path: &Path, cells: &[ImageCell], title: &str) -> Result<()> 
         header.titled(title, ("sans-serif", 20))?;
         for (area, scene) in body.split_evenly((scenes.len().max(1), 1)).iter().zip(&scenes) {
             let mine: Vec<&ImageCell> = cells.iter().filter(|c| c.scene == *scene).collect();
-            let x_max = mine.iter().map(|c| c.seconds * 1e3).fold(0.0, f64::max).max(1e-3) * 1.6;
-            let x_min = mine.iter().map(|c| c.seconds * 1e3).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / 1.6;
-            let y_max = mine.iter().map(|c| c.rmse * 100.0).fold(0.0, f64::max).max(0.1) * 1.15;
-            let mut chart = ChartBuilder::on(area)
-                .caption(format!("{scene}: render time vs image error"), ("sans-serif", 16))
-                .margin(15)
-                .x_label_area_size(35)
-                .y_label_area_size(60)
-                .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)?;
+            let time_error: Vec<(f64, f64)> = mine.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect();
+            let mut chart = crate::bench::plot::time_error_chart(
+                area,
+                format!("{scene}: render time vs image error"),
+                &time_error,
+                1.6,
+            )?;
             chart
                 .configure_mesh()
                 .x_desc("render wall time, ms (log scale)")
                 .y_desc("RMSE vs converged reference, % of its mean")
                 .draw()?;
-            let front =
-                crate::bench::plot::pareto_front(mine.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect());
+            let front = crate::bench::plot::pareto_front(time_error.clone());
             chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?;
             for c in &mine {
                 let color = if c.primary == Primary::Raster { RGBColor(214, 39, 40) } else { RGBColor(31, 119, 180) };

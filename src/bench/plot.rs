@@ -11,6 +11,33 @@ use crate::bench::matrix::{Backend, Cell};
 use crate::bench::rays::RayKind;
 use crate::error::{Error, Result};
 
+/// A time (log scale) against error chart.
+pub(crate) type TimeErrorChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::combinators::LogCoord<f64>, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A panel of time (x, log scale) against error (y) for the `(time, error)`
+/// points: x spans their times, never less than a factor of 2, widened by the
+/// factor `margin` each way; y runs from 0 to 15 % above the largest error.
+pub(crate) fn time_error_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, plotters::coord::Shift>,
+    caption: String,
+    points: &[(f64, f64)],
+    margin: f64,
+) -> std::result::Result<TimeErrorChart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
+    let x_max = points.iter().map(|p| p.0).fold(0.0, f64::max).max(1e-3) * margin;
+    let x_min = points.iter().map(|p| p.0).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / margin;
+    let y_max = points.iter().map(|p| p.1).fold(0.0, f64::max).max(0.1) * 1.15;
+    ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(15)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)
+}
+
 /// Debian's DejaVu Sans (package fonts-dejavu-core, installed by tools/setup).
 const FONT_PATHS: [&str; 2] =
     ["/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf", "/usr/share/fonts/dejavu/DejaVuSans.ttf"];
@@ -160,15 +187,8 @@ pub fn time_vs_error(path: &Path, cells: &[Cell], title: &str) -> Result<()> {
                     (label, Family::of(mine[0]), 1e9 * seconds / rays.max(1) as f64, error)
                 })
                 .collect();
-            let x_max = points.iter().map(|p| p.2).fold(0.0, f64::max).max(1e-3) * 1.5;
-            let x_min = points.iter().map(|p| p.2).fold(f64::INFINITY, f64::min).min(x_max / 2.0) / 1.5;
-            let y_max = points.iter().map(|p| p.3).fold(0.0, f64::max).max(0.1) * 1.15;
-            let mut chart = ChartBuilder::on(area)
-                .caption(format!("{scene}, {kind} rays: time vs error"), ("sans-serif", 16))
-                .margin(15)
-                .x_label_area_size(35)
-                .y_label_area_size(60)
-                .build_cartesian_2d((x_min..x_max).log_scale(), 0.0..y_max)?;
+            let time_error: Vec<(f64, f64)> = points.iter().map(|p| (p.2, p.3)).collect();
+            let mut chart = time_error_chart(area, format!("{scene}, {kind} rays: time vs error"), &time_error, 1.5)?;
             chart
                 .configure_mesh()
                 .light_line_style(WHITE) // no minor grid: a lighter, smaller PNG
