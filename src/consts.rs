@@ -27,6 +27,12 @@ pub const TRAVERSAL_EPS_LOG2: u32 = 20;
 pub const SHIFT_DIAGONALS: u32 = 16;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;
+/// The 8-byte kd-tree node (`KdNode`, `glsl/shared/kdnode.glsl`): bits of its
+/// second word that hold the split axis (0..=2) or `NODE_LEAF`; the bits above
+/// hold the above child's index (interior) or the primitive count (leaf).
+pub const NODE_TAG_BITS: u32 = 2;
+/// The tag (low `NODE_TAG_BITS` of the second word) of a leaf.
+pub const NODE_LEAF: u32 = 3;
 /// `ropes` entry of a face on the scene boundary.
 pub const NO_ROPE: u32 = 0xFFFF_FFFF;
 
@@ -176,6 +182,8 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("EDGE_GAMMA_LOG2", EDGE_GAMMA_LOG2),
     ("TRAVERSAL_EPS_LOG2", TRAVERSAL_EPS_LOG2),
     ("SHIFT_DIAGONALS", SHIFT_DIAGONALS),
+    ("NODE_TAG_BITS", NODE_TAG_BITS),
+    ("NODE_LEAF", NODE_LEAF),
     ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),
