@@ -229,7 +229,8 @@ void trace_ray(uint index) {
     // leaf.glsl). Packets trace once, carefully: their kernels are large and
     // slower than single rays on lavapipe anyway.
     bool finished = run_traversal(alive && !skip, r, t0, t1, best, c);
-    if (PASS == PASS_FAST && alive && best.needs_careful) {
+    bool needs_careful = best.needs_careful;  // a plain bool: the && below stays branch-free
+    if (PASS == PASS_FAST && alive && needs_careful) {
         uint slot = atomicAdd(careful[3], 1u);
         careful[CAREFUL_HEADER_WORDS + slot] = index;
         // One more workgroup for the careful pass at every TRACE_WORKGROUP_SIZE-th ray:

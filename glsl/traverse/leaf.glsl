@@ -112,8 +112,9 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
         if (result == TRI_HIT) {
             // [t - e, t + e] meets the closest hit's interval: order them in f64 (unless
             // it is the same triangle, met again in another leaf: the same bits).
-            if (ROBUST && !ANY_HIT && best.reference != NO_REF && prim != best.hit.prim_id &&
-                t + e >= best.hit.t - best.err) {
+            // (has_best is a plain bool so that the && chain stays branch-free up to it.)
+            bool has_best = best.reference != NO_REF;
+            if (ROBUST && !ANY_HIT && has_best && prim != best.hit.prim_id && t + e >= best.hit.t - best.err) {
                 tie = true;
             }
             if (t <= best.hit.t) {
@@ -204,7 +205,8 @@ uint visit_leaf(TraceRay r, uvec2 n, float t1, inout Closest best, inout TraceCo
 // no triangle to test, so the descent may pop the next entry itself).
 bool descends(uvec2 n, float t1, Closest best) {
     if (!node_is_leaf(n)) return true;
-    return node_prim_count(n) == 0u && !leaf_done(best, t1);
+    bool done = leaf_done(best, t1);  // before the &&, which would branch around a call
+    return node_prim_count(n) == 0u && !done;
 }
 
 #endif
