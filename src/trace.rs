@@ -114,9 +114,10 @@ use crate::gpu::{
     check_range, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps,
 };
 use crate::kdtree::links::TreeLinks;
-use crate::kdtree::traverse::{Counters, Traversal, Variant};
+use crate::kdtree::traverse::Counters;
 use crate::kdtree::{KdNode, KdTree};
 use crate::ray_query::RayQueryScene;
+use crate::traversal::{Traversal, Variant};
 
 /// Push constants of `trace.comp` (`TraceParams` in glsl/shared/ray.glsl).
 #[repr(C)]
