@@ -4,7 +4,7 @@
 // lanes see as front to back; a lane whose own order differs still gets every
 // part of its segment, and the closest hit wins because a popped entry is
 // visited only by lanes whose interval starts before their best hit.
-// No CPU twin: the twins trace single rays, and packets must give their hits
+// No CPU twin of its own: packets must give the single-ray twins' hits
 // (tests/packets.rs).
 #ifndef TRAVERSE_PACKET_STACK_GLSL
 #define TRAVERSE_PACKET_STACK_GLSL

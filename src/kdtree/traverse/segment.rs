@@ -13,7 +13,7 @@ use crate::geom::{Aabb, WatertightRay};
 /// (a subtraction of a zero `seg_lo`, `t_shift` or `t_err`).
 pub(super) struct TraceRay {
     pub(super) wr: WatertightRay,
-    /// [`Traversal::robust`]: the widening of the split decisions.
+    /// [`Traversal::robust`](crate::traversal::Traversal::robust): the widening of the split decisions.
     pub(super) eps: f32,
     /// Absolute error bound of a segment-frame plane distance (0 unless shifted).
     pub(super) t_err: f32,
