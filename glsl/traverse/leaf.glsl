@@ -49,9 +49,10 @@ const bool careful_pass = PASS != PASS_FAST;
 // reference (an index of tri_texels; NO_REF for none) and `err` a bound on
 // |hit.t - its exact t|: intersect_leaf orders hits within each other's bounds
 // in f64. `needs_careful`: the fast pass met what it leaves to the careful pass
-// (see careful_pass), so this trace's answer is not written. The member order is
-// the compiler's concern only: this one keeps the kernels' instructions as they
-// were with per-invocation globals (docs/BENCH.md).
+// (see careful_pass), so this trace's answer is not written. The member order
+// matters to the compiler only (it orders the loops' phis): this one keeps the
+// kernels' instruction counts closest to those of per-invocation globals, which
+// the members replace (docs/BENCH.md).
 struct Closest {
     bool needs_careful;
     uint reference;
