@@ -2,8 +2,8 @@
 // The trace kernel: one ray per invocation, closest hit, traversal variant chosen
 // by a specialization constant. Shared layouts live in glsl/shared/.
 //
-// Mesa lavapipe (22.x) gives each subgroup one budget of 65535 loop passes for
-// the whole run and silently ends loops when it is spent. Every loop here checks
+// A driver may end loops silently (Mesa lavapipe gives each subgroup one budget
+// of loop passes for the whole run, see docs/BENCH.md). Every loop here checks
 // that it ran to its end; a ray whose traversal was cut short (or hit the step
 // cap) is written as PRIM_INCOMPLETE, which the host reports, never as a miss.
 
@@ -36,13 +36,13 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 
 
 // Nodes and triangles are uniform texel buffers, not storage buffers: lavapipe
-// (22.x) loads a storage buffer one lane and one 32-bit component at a time, in a
+// loads a storage buffer one lane and one 32-bit component at a time, in a
 // branchy loop, whereas a texel fetch is a straight-line gather of whole texels.
 // Nodes: R32G32_UINT, one texel per node. Triangles: R32G32B32A32_UINT, three
 // texels per leaf reference, in prim_indices order: (v0, prim), (v1, 0), (v2, 0).
 // Declared as texture buffers without a sampler (texelFetch through
 // GL_EXT_samplerless_texture_functions): a sampled image of dimension Buffer is
-// deprecated SPIR-V, which Mesa 25 reports as a warning.
+// deprecated SPIR-V, which Mesa reports as a warning.
 layout(set = 0, binding = BINDING_NODES) uniform utextureBuffer node_texels;
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
 layout(set = 0, binding = BINDING_TRIANGLES) uniform utextureBuffer tri_texels;
@@ -64,7 +64,8 @@ layout(push_constant) uniform Push { TraceParams params; };
 const float FLT_MIN_NORMAL = 1.17549435e-38;
 const float FLT_MAX = 3.40282347e38;
 
-#include "common.glsl"
+// The traversal pieces (segment, node, decide, seek, leaf, boxes) come with the
+// variants that include them; each names the buffers and constants above it reads.
 #include "stack.glsl"
 #include "restart.glsl"
 #include "push_down.glsl"
@@ -99,8 +100,8 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     double t_shift = double(t0);
     precise dvec3 p = o + t_shift * d;
     vec3 hi = vec3(p);
-    // Mesa 25 folds dvec3(vec3(p)) into p, dropping the f32 rounding (lavapipe
-    // 25.0.7, `precise` or not): hi goes back to f64 through its bits XORed with
+    // A compiler may fold dvec3(vec3(p)) into p, dropping the f32 rounding (Mesa
+    // does, `precise` or not): hi goes back to f64 through its bits XORed with
     // params.pad0, a push constant that is always 0 and unknown to the compiler.
     dvec3 hi64 = dvec3(uintBitsToFloat(floatBitsToUint(hi) ^ uvec3(params.pad0)));
     precise dvec3 rest = p - hi64;
@@ -147,7 +148,7 @@ bool is_far(TraceRay r, float t0) {
 
 // Runs the variant on one ray (every lane enters for packets: their decisions
 // are ballots). False when the driver cut a loop short.
-bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
+bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     bool finished = true;
     bool packet_variant = VARIANT == VARIANT_STACK || VARIANT == VARIANT_RESTART || VARIANT == VARIANT_PUSH_DOWN ||
                           VARIANT == VARIANT_SHORT_STACK || VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK;
@@ -194,11 +195,7 @@ void trace_ray(uint index) {
     ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
     ray.tmax = uintBitsToFloat(w3.y);
 
-    Hit best;
-    best.t = ray.tmax;
-    best.prim_id = PRIM_MISS;
-    best.u = 0.0;
-    best.v = 0.0;
+    Closest best = closest_none(ray.tmax);
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
 
     ray.dir = traced_dir(ray.dir);
@@ -221,17 +218,18 @@ void trace_ray(uint index) {
     if (SEGMENT_FRAME && far) {
         alive = shift_to_scene(r, t0, t1);
         precise float best_seg = ray.tmax - r.wr.t_shift;
-        best.t = best_seg;  // the segment frame, like every hit below
+        best.hit.t = best_seg;  // the segment frame, like every hit below
     }
     // The fast pass leaves far rays to the careful one (without tracing them).
     bool skip = PASS == PASS_FAST && far;
-    if (skip) needs_careful = true;
-    if (!valid) best.prim_id = PRIM_INVALID;
+    if (skip) best.needs_careful = true;
+    if (!valid) best.hit.prim_id = PRIM_INVALID;
     // Robust single rays trace fast first, then carefully in a second dispatch when
     // the fast trace met what it could not decide in f32 (see careful_pass in
-    // common.glsl). Packets trace once, carefully: their kernels are large and
+    // leaf.glsl). Packets trace once, carefully: their kernels are large and
     // slower than single rays on lavapipe anyway.
     bool finished = run_traversal(alive && !skip, r, t0, t1, best, c);
+    bool needs_careful = best.needs_careful;  // a plain bool: the && below stays branch-free
     if (PASS == PASS_FAST && alive && needs_careful) {
         uint slot = atomicAdd(careful[3], 1u);
         careful[CAREFUL_HEADER_WORDS + slot] = index;
@@ -247,15 +245,16 @@ void trace_ray(uint index) {
         }
         return;
     }
-    if (!finished && best.prim_id != PRIM_INVALID) best.prim_id = PRIM_INCOMPLETE;
+    Hit hit = best.hit;
+    if (!finished && hit.prim_id != PRIM_INVALID) hit.prim_id = PRIM_INCOMPLETE;
     // Back to the ray's own parameter (one rounding, in f64).
-    if (SEGMENT_FRAME && r.wr.t_shift != 0.0) best.t = float(double(best.t) + double(r.wr.t_shift));
-    if (best.prim_id >= PRIM_INCOMPLETE) {
-        best.t = best.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
-        best.u = 0.0;
-        best.v = 0.0;
+    if (SEGMENT_FRAME && r.wr.t_shift != 0.0) hit.t = float(double(hit.t) + double(r.wr.t_shift));
+    if (hit.prim_id >= PRIM_INCOMPLETE) {
+        hit.t = hit.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
+        hit.u = 0.0;
+        hit.v = 0.0;
     }
-    hits[index] = best;
+    hits[index] = hit;
     if (COUNTERS) {
         uint base = index * COUNTERS_PER_RAY;
         counters[base + COUNTER_NODES] = c.nodes;

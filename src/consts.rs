@@ -22,8 +22,8 @@ pub const EDGE_GAMMA_LOG2: u32 = 19;
 pub const TRAVERSAL_EPS_LOG2: u32 = 20;
 /// Robust rays whose origin lies more than this many scene diagonals before
 /// their entry into the scene box are traversed from that entry (the segment
-/// frame of common.glsl), so that the widening above stays a fraction of the
-/// scene, not of a huge `t`. Nearer rays are traversed from their own origin.
+/// frame of `glsl/traverse/segment.glsl`), so that the widening above stays a
+/// fraction of the scene, not of a huge `t`. Nearer rays are traversed from their own origin.
 pub const SHIFT_DIAGONALS: u32 = 16;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;

@@ -136,9 +136,9 @@ pub struct WatertightRay {
     pub sz: f32,
     /// Ray origin; the f64 test translates the vertices by `-origin` before the shear.
     pub origin: Vec3,
-    /// The segment frame (`TraceRay` in common.glsl): the f32 test translates by
-    /// `-(seg_origin + seg_lo)`, the point `origin + t_shift·dir` of the ray, and
-    /// answers `t - t_shift`; `seg_err` bounds (per axis, scaled by
+    /// The segment frame (`TraceRay` in `glsl/traverse/segment.glsl`): the f32
+    /// test translates by `-(seg_origin + seg_lo)`, the point `origin +
+    /// t_shift·dir` of the ray, and answers `t - t_shift`; `seg_err` bounds (per axis, scaled by
     /// `1/EDGE_GAMMA`) how far `seg_origin + seg_lo` may lie from that point.
     /// `origin`, 0, 0, 0 unless a far ray was shifted to the scene box.
     pub seg_origin: Vec3,

@@ -153,6 +153,7 @@ pub mod stress;
 #[cfg(feature = "cli")]
 pub mod sweep;
 pub mod trace;
+pub mod traversal;
 
 pub use error::{Error, Result};
 pub use geom::{Aabb, Hit, Ray};

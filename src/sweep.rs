@@ -5,8 +5,9 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::geom::Ray;
-use crate::kdtree::traverse::{Counters, Traversal, Variant};
+use crate::kdtree::traverse::Counters;
 use crate::trace::{TraceOptions, Tracer};
+use crate::traversal::{Traversal, Variant};
 
 /// One cell of the sweep.
 #[derive(Clone, Debug)]

@@ -114,9 +114,10 @@ use crate::gpu::{
     check_range, in_order, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps,
 };
 use crate::kdtree::links::TreeLinks;
-use crate::kdtree::traverse::{Counters, Traversal, Variant};
+use crate::kdtree::traverse::Counters;
 use crate::kdtree::{KdNode, KdTree};
 use crate::ray_query::RayQueryScene;
+use crate::traversal::{Traversal, Variant};
 
 pub use crate::abi::TraceParams;
 

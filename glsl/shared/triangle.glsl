@@ -18,7 +18,7 @@
 #define TRIANGLE_GLSL
 
 // The f64 test works from `origin`, in the ray's own parameter. The f32 test
-// works in the segment frame (TraceRay in traverse/common.glsl): from the point
+// works in the segment frame (TraceRay in traverse/segment.glsl): from the point
 // seg_origin + seg_lo = origin + t_shift * dir (a far ray moved to the scene
 // box), answering t - t_shift; seg_err bounds, per axis and divided by
 // EDGE_GAMMA, how far that point may lie from the exact one. Unshifted:
@@ -101,7 +101,7 @@ double diff_of_products(double a, double b, double c, double d) {
 //
 // The hit's t lies in [tmin, r.ray_tmax] (exactly, in f64); `t64_out` is its f64
 // value, by which callers order hits whose f32 t lie within rounding of each
-// other (see intersect_leaf in traverse/common.glsl).
+// other (see intersect_leaf in traverse/leaf.glsl).
 //
 // Answers in the segment frame: t_out and t64_out are t - t_shift, and for a
 // shifted ray err_out bounds t64_out's error (num, den and the subtraction;

@@ -5,12 +5,18 @@
 // With ROBUST on, a leaf left near an edge or corner of its box, a climb or
 // descent that meets a plane within rounding of the leaf exit (other than the
 // plane just crossed), or a ray inside a split plane finishes with exact
-// restarts from there (see near_t0 in common.glsl).
-// CPU twin: `trace_backtrack` in src/kdtree/traverse.rs.
+// restarts from there (see near_t0 in boxes.glsl).
+// CPU twin: `trace_backtrack` in src/kdtree/traverse/backtrack.rs.
 #ifndef TRAVERSE_BACKTRACK_GLSL
 #define TRAVERSE_BACKTRACK_GLSL
 
-bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+#include "node.glsl"
+#include "decide.glsl"
+#include "leaf.glsl"
+#include "boxes.glsl"
+#include "restart.glsl"
+
+bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Closest best, inout TraceCounters c) {
     float t_scene0 = t0;
     uint node = 0u;
     float t1 = t1_scene;
@@ -91,7 +97,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Hit best, inout
     if (fallback) {
         // The fast pass leaves the exact restarts to the careful one (see careful_pass).
         if (!careful_pass) {
-            needs_careful = true;
+            best.needs_careful = true;
             return true;
         }
         return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);

@@ -2,8 +2,13 @@
 // a packet is an aligned group of PACKET_WIDTH lanes inside a subgroup. Decisions
 // come from ballots restricted to the group's bits; each lane keeps its own
 // t-interval and hit; lanes that do not need a subtree are masked out.
+// Expects from its includer: the specialization constant PACKET_WIDTH, the
+// subgroup extensions, and what decide.glsl expects.
 #ifndef TRAVERSE_PACKET_GLSL
 #define TRAVERSE_PACKET_GLSL
+
+#include "segment.glsl"
+#include "decide.glsl"
 
 // The ballot bits of this lane's packet.
 uvec4 packet_mask() {

@@ -12,11 +12,19 @@
 // behind the earliest entry it had to leave (t_gap), or over all of it when the
 // lane lay in a split plane (whose other side it may have skipped). A lane that
 // finishes earlier does the same when it left an entry starting before its hit.
+// No CPU twin of its own: packets must give the single-ray twins' hits
+// (tests/packets.rs).
 #ifndef TRAVERSE_PACKET_SHORT_STACK_GLSL
 #define TRAVERSE_PACKET_SHORT_STACK_GLSL
 
+#include "node.glsl"
+#include "decide.glsl"
+#include "leaf.glsl"
+#include "packet.glsl"
+#include "restart.glsl"
+
 bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_scene, uint size, bool use_push_down,
-                              inout Hit best, inout TraceCounters c) {
+                              inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[STACK_SIZE];
     float stack_t0[STACK_SIZE];
@@ -96,7 +104,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
         if (lane_on) {
             c.leaves += 1u;
             if (!intersect_leaf(r, n, best, c)) complete = false;
-            bool done = ANY_HIT ? best.prim_id != PRIM_MISS : best_reach(best) <= t1;
+            bool done = leaf_done(best, t1);
             t_done = t1;
             if (done || t1 >= t1_scene) {
                 alive = false;

@@ -4,19 +4,25 @@
 // lanes see as front to back; a lane whose own order differs still gets every
 // part of its segment, and the closest hit wins because a popped entry is
 // visited only by lanes whose interval starts before their best hit.
+// No CPU twin of its own: packets must give the single-ray twins' hits
+// (tests/packets.rs).
 #ifndef TRAVERSE_PACKET_STACK_GLSL
 #define TRAVERSE_PACKET_STACK_GLSL
 
+#include "node.glsl"
+#include "leaf.glsl"
+#include "packet.glsl"
+
 // True while the lane may still find something in an entry starting at t0.
-bool lane_wants(bool alive, float t0, float t1, Hit best) {
+bool lane_wants(bool alive, float t0, float t1, Closest best) {
     if (!alive || !(t0 <= t1)) return false;
-    if (ANY_HIT) return best.prim_id == PRIM_MISS;
+    if (ANY_HIT) return best.hit.prim_id == PRIM_MISS;
     float reach = best_reach(best);
-    return t0 < reach || (best.prim_id == PRIM_MISS && t0 <= reach);
+    return t0 < reach || (best.hit.prim_id == PRIM_MISS && t0 <= reach);
 }
 
 // Returns false when this lane's traversal was cut short.
-bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
+bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[MAX_STACK];
     float stack_t0[MAX_STACK];

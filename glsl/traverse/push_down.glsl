@@ -3,11 +3,16 @@
 // that needed both children. Its region holds the whole rest of the segment, so
 // the levels above it are never visited again.
 // With ROBUST on, restarts are exact (trace_restart_exact in restart.glsl).
-// CPU twin: `trace_push_down` in src/kdtree/traverse.rs.
+// CPU twin: `trace_push_down` in src/kdtree/traverse/push_down.rs.
 #ifndef TRAVERSE_PUSH_DOWN_GLSL
 #define TRAVERSE_PUSH_DOWN_GLSL
 
-bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+#include "node.glsl"
+#include "decide.glsl"
+#include "leaf.glsl"
+#include "restart.glsl"
+
+bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Closest best, inout TraceCounters c) {
     if (ROBUST) return trace_restart_exact(r, t0, t1_scene, true, -3.40282347e38, 0u, best, c);
     uint node = 0u;
     float t1 = t1_scene;

@@ -2,15 +2,20 @@
 // a hit inside it, the segment becomes [leaf exit, scene exit] and descent starts
 // again at the root. Progress: after a restart the plane the last leaf was left
 // through goes far on a tie, planes before t0 are passed, and the restart point
-// always moves forward (restart_point in common.glsl), so restarts end.
+// always moves forward (restart_point in decide.glsl), so restarts end.
 // That is the paper's algorithm, run when ROBUST is off. With ROBUST on, restarts
 // are exact (trace_restart_exact below) and visit what `stack` visits.
-// CPU twins: `trace_restart` and `trace_restart_exact` in src/kdtree/traverse.rs.
+// CPU twins: `trace_restart` and `trace_restart_exact` in src/kdtree/traverse/restart.rs.
 #ifndef TRAVERSE_RESTART_GLSL
 #define TRAVERSE_RESTART_GLSL
 
+#include "node.glsl"
+#include "decide.glsl"
+#include "seek.glsl"
+#include "leaf.glsl"
+
 // Exact restarts for `restart` and (use_push_down) `push-down`: every restart
-// seeks the entry a full stack would pop next (Seek in common.glsl) by
+// seeks the entry a full stack would pop next (Seek in seek.glsl) by
 // descending again from the restart node toward the leaf just left, so the
 // leaves, their order and their segments are the stack's, and so are the
 // answers. The push-down node is the
@@ -22,7 +27,7 @@
 // be done (the fallback of robust backtrack, ropes and packets); -FLT_MAX for none.
 // `step`: the loop steps already taken.
 bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, float t_from, uint step,
-                         inout Hit best, inout TraceCounters c) {
+                         inout Closest best, inout TraceCounters c) {
     precise float t_from_lo_rel = t_from - T_EPS * abs(t_from);
     float t_from_lo = minus_err(r, t_from_lo_rel);
     uint node = 0u;
@@ -84,7 +89,7 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
     return false;
 }
 
-bool trace_restart(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+bool trace_restart(TraceRay r, float t0, float t1_scene, inout Closest best, inout TraceCounters c) {
     if (ROBUST) return trace_restart_exact(r, t0, t1_scene, false, -3.40282347e38, 0u, best, c);
     uint node = 0u;
     float t1 = t1_scene;

@@ -6,12 +6,18 @@
 // With ROBUST on, a leaf left within rounding of an edge or corner of its box, a
 // descent that meets a plane within rounding of t0 (other than the face just
 // crossed), or a ray inside a split plane finishes with exact restarts from
-// there (see near_t0 in common.glsl).
-// CPU twin: `trace_ropes` in src/kdtree/traverse.rs.
+// there (see near_t0 in boxes.glsl).
+// CPU twin: `trace_ropes` in src/kdtree/traverse/ropes.rs.
 #ifndef TRAVERSE_ROPES_GLSL
 #define TRAVERSE_ROPES_GLSL
 
-bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout TraceCounters c) {
+#include "node.glsl"
+#include "decide.glsl"
+#include "leaf.glsl"
+#include "boxes.glsl"
+#include "restart.glsl"
+
+bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Closest best, inout TraceCounters c) {
     float t_scene0 = t0;
     uint node = 0u;
     float t1 = t1_scene;
@@ -74,7 +80,7 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Hit best, inout Tra
     if (fallback) {
         // The fast pass leaves the exact restarts to the careful one (see careful_pass).
         if (!careful_pass) {
-            needs_careful = true;
+            best.needs_careful = true;
             return true;
         }
         return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);

@@ -2,13 +2,18 @@
 // STACK_SIZE entries; a push onto a full stack overwrites (drops) the oldest
 // entry; when the stack runs empty before the segment ends, restart behind the
 // last leaf — at the root, or at the push-down node when `use_push_down`.
-// With ROBUST on, that restart is exact (Seek in common.glsl): the
+// With ROBUST on, that restart is exact (Seek in seek.glsl): the
 // leaves and answers are the full stack's.
-// CPU twin: `trace_short_stack` in src/kdtree/traverse.rs.
+// CPU twin: `trace_short_stack` in src/kdtree/traverse/short_stack.rs.
 #ifndef TRAVERSE_SHORT_STACK_GLSL
 #define TRAVERSE_SHORT_STACK_GLSL
 
-bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down, inout Hit best,
+#include "node.glsl"
+#include "decide.glsl"
+#include "seek.glsl"
+#include "leaf.glsl"
+
+bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down, inout Closest best,
                        inout TraceCounters c) {
     uint stack_node[STACK_SIZE];
     float stack_t0[STACK_SIZE];
@@ -27,7 +32,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
     bool push_down = use_push_down;
     uint dropped = 0u;      // exact restarts: entries pending below the short stack
     bool in_plane = false;  // a ray in a split plane pushed an entry (see restart.glsl)
-    Seek k = seek_start(0u, false, 0u);  // exact restarts seek in this loop (common.glsl)
+    Seek k = seek_start(0u, false, 0u);  // exact restarts seek in this loop (seek.glsl)
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {

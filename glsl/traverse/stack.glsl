@@ -1,8 +1,12 @@
 // `stack`: front-to-back traversal with a full per-ray stack of (node, t0, t1)
 // (pbrt-v3's KdTreeAccel::Intersect). The baseline every variant is compared to.
-// CPU twin: `trace_stack` in src/kdtree/traverse.rs.
+// CPU twin: `trace_stack` in src/kdtree/traverse/stack.rs.
 #ifndef TRAVERSE_STACK_GLSL
 #define TRAVERSE_STACK_GLSL
+
+#include "node.glsl"
+#include "decide.glsl"
+#include "leaf.glsl"
 
 // Returns true when traversal finished; false when it was cut short.
 //
@@ -13,7 +17,7 @@
 // runs once per interior step, and lanes reach their leaves together. The single
 // push site matters for the same reason: each private-array store is a per-lane
 // scatter whether or not any lane pushes.
-bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
+bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uint stack_node[MAX_STACK];
     float stack_t0[MAX_STACK];
     float stack_t1[MAX_STACK];
@@ -68,8 +72,8 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
             } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
         }
         // A second pop site, on purpose: leaving visited leaves through the
-        // descent's pop (one site) cost 3.6-4.4 % more instructions on lavapipe
-        // (bunny camera / random rays), as every lane then enters the descent at a pop.
+        // descent's pop (one site) costs more instructions on SIMD drivers, as every
+        // lane then enters the descent at a pop (see docs/BENCH.md).
         if (sp == 0u) return true;
         --sp;
         node = stack_node[sp];

@@ -12,10 +12,10 @@ use glam::Vec3;
 use plotters::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::kdtree::traverse::Traversal;
 use crate::render::{render, PointLight, Primary, RenderOutput, RenderSettings};
 use crate::scene::{Camera, Scene};
 use crate::trace::Tracer;
+use crate::traversal::Traversal;
 
 /// What the image cells sweep.
 #[derive(Clone, Debug)]

@@ -17,11 +17,12 @@ use crate::exact::Exact;
 use crate::geom::{Hit, Ray};
 use crate::gpu::GpuContext;
 use crate::kdtree::links::TreeLinks;
-use crate::kdtree::traverse::{trace_ray, Counters, SceneRef, Traversal, Variant};
+use crate::kdtree::traverse::{trace_ray, Counters, SceneRef};
 use crate::kdtree::{BuildConfig, Builder, KdTree};
 use crate::scene::{Camera, Scene};
 use crate::stress::{exact_answers, judge_with, Tally};
 use crate::trace::{TraceOptions, Tracer};
+use crate::traversal::{Traversal, Variant};
 
 /// The builder settings the matrix knows, by name: `sweep` is `default`'s
 /// costs with the exact sweep at every node (`default` bins the large ones).

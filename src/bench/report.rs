@@ -6,7 +6,7 @@ use std::path::Path;
 use crate::bench::matrix::{baselines, Backend, Cell};
 use crate::error::{Error, Result};
 use crate::exact::Verdict;
-use crate::kdtree::traverse::Variant;
+use crate::traversal::Variant;
 
 /// The verdicts that disagree, with their counts, e.g. `neighbour 2, grazing miss 1`.
 pub fn classes(cell: &Cell) -> String {

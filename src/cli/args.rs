@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use glam::Vec3;
 
-use kdtrace::kdtree::traverse::Traversal;
 use kdtrace::kdtree::BuildConfig;
 use kdtrace::trace::Backend;
+use kdtrace::traversal::Traversal;
 
 // The traversal and the backend, shared by `render`, `trace` and `verify`.
 #[derive(clap::Args, Clone)]

@@ -7,11 +7,11 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use kdtrace::gpu::GpuContext;
-use kdtrace::kdtree::traverse::Traversal;
 use kdtrace::kdtree::KdTree;
 use kdtrace::render::{PointLight, Primary, RenderPlan, RenderSettings};
 use kdtrace::scene::{Camera, Scene};
 use kdtrace::trace::{Backend, TraceOptions, Tracer};
+use kdtrace::traversal::Traversal;
 
 use super::args::{choice, choices, parse_light, parse_vec3, PrimaryKind, TraversalArgs, TreeArgs};
 use super::common::{backend_context, default_camera, load_and_build, trace_bar, Stages};

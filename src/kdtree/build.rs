@@ -342,7 +342,7 @@ mod tests {
     }
 
     /// A small pbrt-style front-to-back stack traversal, written independently of
-    /// `traverse.rs`, using the watertight test. Returns the closest hit.
+    /// `kdtree::traverse`, using the watertight test. Returns the closest hit.
     fn trace(tree: &KdTree, tris: &[[Vec3; 3]], ray: &Ray) -> Hit {
         let (o, d) = (Vec3::from(ray.origin), Vec3::from(ray.dir));
         let b = tree.bounds;

@@ -17,9 +17,9 @@ use super::plan::{material_flags, RenderPlan};
 use super::settings::RenderSettings;
 use crate::error::{Error, Result};
 use crate::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Rasterizer, Timestamps};
-use crate::kdtree::traverse::Traversal;
 use crate::scene::Scene;
 use crate::trace::{TraceBinding, TraceOptions, Tracer};
+use crate::traversal::Traversal;
 
 type Ctx = std::sync::Arc<GpuContext>;
 

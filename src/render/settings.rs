@@ -4,7 +4,7 @@
 use glam::Vec3;
 
 use crate::error::{Error, Result};
-use crate::kdtree::traverse::Traversal;
+use crate::traversal::Traversal;
 
 /// A point light (`kdtrace render --light x,y,z[,intensity]`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +83,7 @@ impl RenderSettings {
             lights: Vec::new(),
             background: None,
             seed: 0,
-            traversal: Traversal::closest(crate::kdtree::traverse::Variant::Stack),
+            traversal: Traversal::closest(crate::traversal::Variant::Stack),
             skip_unneeded: true,
             primary: Primary::Trace,
             keep_first_hits: false,

@@ -1,0 +1,33 @@
+// Node fetches and the per-ray counters they feed. CPU twin:
+// src/kdtree/traverse/node.rs.
+//
+// Expects from its includer: the node texel buffer `node_texels` (R32G32_UINT,
+// one texel per node; see trace.comp).
+#ifndef TRAVERSE_NODE_GLSL
+#define TRAVERSE_NODE_GLSL
+
+#include "kdnode.glsl"
+
+// Per-ray counters (kept even when COUNTERS is off; the compiler drops dead stores).
+struct TraceCounters {
+    uint nodes;
+    uint leaves;
+    uint triangles;
+    uint restarts;
+    uint steps;
+    uint drops;
+};
+
+// Loads a node.
+uvec2 load_node(uint node) {
+    return texelFetch(node_texels, int(node)).xy;
+}
+
+// Fetches a node, counting the visit and the loop step.
+uvec2 fetch_node(uint node, inout TraceCounters c) {
+    c.steps += 1u;
+    c.nodes += 1u;
+    return load_node(node);
+}
+
+#endif
