@@ -72,7 +72,7 @@ struct TraceCounters {
 
 // Loads a node (see trace.comp for the texel layout).
 uvec2 load_node(uint node) {
-    return texelFetch(node_texels, int(node)).xy;
+    return imageLoad(node_texels, int(node)).xy;
 }
 
 // Fetches a node, counting the visit and the loop step.
@@ -282,10 +282,10 @@ uint seek_step(inout Seek k, uint node, uvec2 n, uint visit, uint near, uint far
 // order, the prim id inline).
 uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
     int base = int(index) * 3;
-    uvec4 a = texelFetch(tri_texels, base);
+    uvec4 a = imageLoad(tri_texels, base);
     v0 = uintBitsToFloat(a.xyz);
-    v1 = uintBitsToFloat(texelFetch(tri_texels, base + 1).xyz);
-    v2 = uintBitsToFloat(texelFetch(tri_texels, base + 2).xyz);
+    v1 = uintBitsToFloat(imageLoad(tri_texels, base + 1).xyz);
+    v2 = uintBitsToFloat(imageLoad(tri_texels, base + 2).xyz);
     return a.w;
 }
 
