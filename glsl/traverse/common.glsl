@@ -60,6 +60,23 @@ float plus_err(TraceRay r, float x) {
     return SEGMENT_FRAME ? y : x;
 }
 
+// A stack entry's segment [t0, t1] as one 64-bit word (the bits of both floats,
+// no float64 arithmetic): lavapipe stores and loads a private array lane by lane,
+// so one 64-bit array costs half of two 32-bit ones.
+double seg_pack(float t0, float t1) {
+    return packDouble2x32(uvec2(floatBitsToUint(t0), floatBitsToUint(t1)));
+}
+void seg_unpack(double seg, out float t0, out float t1) {
+    uvec2 w = unpackDouble2x32(seg);
+    t0 = uintBitsToFloat(w.x);
+    t1 = uintBitsToFloat(w.y);
+}
+float seg_t0(double seg) {
+    return uintBitsToFloat(unpackDouble2x32(seg).x);
+}
+// The empty segment [inf, -inf].
+#define EMPTY_SEG packDouble2x32(uvec2(0x7f800000u, 0xff800000u))
+
 // Per-ray counters (kept even when COUNTERS is off; the compiler drops dead stores).
 struct TraceCounters {
     uint nodes;

@@ -15,8 +15,7 @@
 // scatter whether or not any lane pushes.
 bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCounters c) {
     uint stack_node[MAX_STACK];
-    float stack_t0[MAX_STACK];
-    float stack_t1[MAX_STACK];
+    double stack_seg[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     uint step = 0u;
@@ -32,8 +31,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
                 if (sp == 0u) return true;
                 --sp;
                 node = stack_node[sp];
-                t0 = stack_t0[sp];
-                t1 = stack_t1[sp];
+                seg_unpack(stack_seg[sp], t0, t1);
             } else {
                 uint near, far;
                 float ts;
@@ -45,8 +43,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
                 } else {
                     // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
                     stack_node[sp] = far;
-                    stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
-                    stack_t1[sp] = t1;
+                    stack_seg[sp] = seg_pack(visit == VISIT_BOTH ? ts : t0, t1);
                     ++sp;
                     node = near;
                     if (visit == VISIT_BOTH) t1 = ts;
@@ -63,9 +60,9 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
             // A closer hit can only lie in an entry that starts before this one: the
             // other side of a split plane the ray lies in (VISIT_BOTH_SAME) has the
             // same segment as the leaf just done. Drop the entries behind the hit.
-            if (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best))) do {
+            if (sp > 0u && !(seg_t0(stack_seg[sp - 1u]) < best_reach(best))) do {
                 --sp;
-            } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
+            } while (sp > 0u && !(seg_t0(stack_seg[sp - 1u]) < best_reach(best)));
         }
         // A second pop site, on purpose: leaving visited leaves through the
         // descent's pop (one site) cost 3.6-4.4 % more instructions on lavapipe
@@ -73,8 +70,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Hit best, inout TraceCoun
         if (sp == 0u) return true;
         --sp;
         node = stack_node[sp];
-        t0 = stack_t0[sp];
-        t1 = stack_t1[sp];
+        seg_unpack(stack_seg[sp], t0, t1);
     }
     return false;
 }
