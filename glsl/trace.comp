@@ -35,17 +35,16 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 #include "triangle.glsl"
 
 
-// Nodes and triangles are uniform texel buffers, not storage buffers: lavapipe
-// loads a storage buffer one lane and one 32-bit component at a time, in a
-// branchy loop, whereas a texel fetch is a straight-line gather of whole texels.
+// Nodes and triangles are read-only storage texel buffers (imageLoad of an
+// imageBuffer), not storage buffers: lavapipe loads a storage buffer one lane and
+// one 32-bit component at a time, whereas an image load is a straight-line gather
+// of whole texels, in a shorter call than a texel fetch through a texture
+// (docs/BENCH.md, "Where the instructions go").
 // Nodes: R32G32_UINT, one texel per node. Triangles: R32G32B32A32_UINT, three
 // texels per leaf reference, in prim_indices order: (v0, prim), (v1, 0), (v2, 0).
-// Declared as texture buffers without a sampler (texelFetch through
-// GL_EXT_samplerless_texture_functions): a sampled image of dimension Buffer is
-// deprecated SPIR-V, which Mesa reports as a warning.
-layout(set = 0, binding = BINDING_NODES) uniform utextureBuffer node_texels;
+layout(set = 0, binding = BINDING_NODES, rg32ui) uniform readonly uimageBuffer node_texels;
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
-layout(set = 0, binding = BINDING_TRIANGLES) uniform utextureBuffer tri_texels;
+layout(set = 0, binding = BINDING_TRIANGLES, rgba32ui) uniform readonly uimageBuffer tri_texels;
 // Rays are read as four 64-bit words (bits only, no float64 arithmetic): lavapipe
 // loads storage buffers per lane and per component, so 4 loads beat 8.
 layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { double ray_words[]; };

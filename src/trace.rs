@@ -290,7 +290,7 @@ impl SceneBuffers {
             }
         }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let texel_usage = vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+        let texel_usage = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
         Ok(SceneBuffers {
             nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), texel_usage, "kd-tree nodes")?,
             prim_indices: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,

@@ -502,3 +502,24 @@ fn trace_builder_choice_and_stage_timings() {
     assert!(!o.status.success() && stderr(&o).contains("--bins"), "{}", stderr(&o));
     common::assert_validation_clean(&ctx);
 }
+
+#[test]
+fn morton_camera_rays_are_the_row_major_rays_reordered() {
+    let scene = scene_path("teapot.obj");
+    let (row, z) = (temp("teapot-row.rays"), temp("teapot-z.rays"));
+    for (file, extra) in [(&row, None), (&z, Some("--morton"))] {
+        let mut args =
+            vec!["rays", scene.to_str().unwrap(), "-o", file.to_str().unwrap(), "--width", "37", "--height", "21"];
+        args.extend(extra);
+        let o = kdtrace(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let row = kdtrace::io::read_rays(&row).unwrap();
+    let z = kdtrace::io::read_rays(&z).unwrap();
+    let pixels = kdtrace::render::morton_pixels(37, 21);
+    assert_eq!(z.len(), row.len());
+    assert_ne!(z, row, "Morton order differs from row-major");
+    for (ray, &p) in z.iter().zip(&pixels) {
+        assert_eq!(*ray, row[p as usize]);
+    }
+}

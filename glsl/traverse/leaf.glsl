@@ -19,10 +19,10 @@
 // order, the prim id inline).
 uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
     int base = int(index) * 3;
-    uvec4 a = texelFetch(tri_texels, base);
+    uvec4 a = imageLoad(tri_texels, base);
     v0 = uintBitsToFloat(a.xyz);
-    v1 = uintBitsToFloat(texelFetch(tri_texels, base + 1).xyz);
-    v2 = uintBitsToFloat(texelFetch(tri_texels, base + 2).xyz);
+    v1 = uintBitsToFloat(imageLoad(tri_texels, base + 1).xyz);
+    v2 = uintBitsToFloat(imageLoad(tri_texels, base + 2).xyz);
     return a.w;
 }
 

@@ -1,8 +1,8 @@
 // Node fetches and the per-ray counters they feed. CPU twin:
 // src/kdtree/traverse/node.rs.
 //
-// Expects from its includer: the node texel buffer `node_texels` (R32G32_UINT,
-// one texel per node; see trace.comp).
+// Expects from its includer: the node texel buffer `node_texels` (a read-only
+// storage texel buffer, R32G32_UINT, one texel per node; see trace.comp).
 #ifndef TRAVERSE_NODE_GLSL
 #define TRAVERSE_NODE_GLSL
 
@@ -20,7 +20,7 @@ struct TraceCounters {
 
 // Loads a node.
 uvec2 load_node(uint node) {
-    return texelFetch(node_texels, int(node)).xy;
+    return imageLoad(node_texels, int(node)).xy;
 }
 
 // Fetches a node, counting the visit and the loop step.

@@ -10,6 +10,7 @@
 #define TRAVERSE_PACKET_STACK_GLSL
 
 #include "node.glsl"
+#include "stack_entry.glsl"
 #include "leaf.glsl"
 #include "packet.glsl"
 
@@ -25,8 +26,7 @@ bool lane_wants(bool alive, float t0, float t1, Closest best) {
 bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[MAX_STACK];
-    float stack_t0[MAX_STACK];
-    float stack_t1[MAX_STACK];
+    double stack_seg[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     bool lane_on = alive;
@@ -47,8 +47,9 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closes
                                         packet_count(lane_on && !s.below_first, mask);
                 stack_node[sp] = below_goes_first ? above : below;
                 bool second = below_goes_first ? s.above : s.below;
-                stack_t0[sp] = second ? (below_goes_first ? s.above_t0 : s.below_t0) : uintBitsToFloat(0x7f800000u);
-                stack_t1[sp] = second ? (below_goes_first ? s.above_t1 : s.below_t1) : uintBitsToFloat(0xff800000u);
+                // A lane that does not need the second child gets the empty [inf, -inf].
+                stack_seg[sp] = !second ? EMPTY_SEG
+                              : (below_goes_first ? seg_pack(s.above_t0, s.above_t1) : seg_pack(s.below_t0, s.below_t1));
                 ++sp;
                 node = below_goes_first ? below : above;
                 lane_on = below_goes_first ? s.below : s.above;
@@ -76,8 +77,7 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closes
         while (sp > 0u) {
             --sp;
             node = stack_node[sp];
-            t0 = stack_t0[sp];
-            t1 = stack_t1[sp];
+            seg_unpack(stack_seg[sp], t0, t1);
             lane_on = lane_wants(alive, t0, t1, best);
             if (packet_any(lane_on, mask)) break;
         }

@@ -30,6 +30,10 @@ pub struct RaysArgs {
     /// Seed of the random rays.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Camera rays in Morton (Z) order over the image, as `kdtrace bench` traces them
+    /// (neighbouring pixels in neighbouring lanes), instead of row-major.
+    #[arg(long)]
+    pub morton: bool,
 }
 
 /// `--kind`.
@@ -50,7 +54,12 @@ pub fn rays(args: RaysArgs) -> Result<()> {
             if args.width == 0 || args.height == 0 || args.width > 16384 || args.height > 16384 {
                 bail!("--width and --height must be in 1..=16384");
             }
-            kdtrace::render::camera_rays(&default_camera(&args.scene, &scene)?, args.width, args.height)
+            let camera = default_camera(&args.scene, &scene)?;
+            if args.morton {
+                kdtrace::render::camera_rays_morton(&camera, args.width, args.height).0
+            } else {
+                kdtrace::render::camera_rays(&camera, args.width, args.height)
+            }
         }
         RayKind::Random => kdtrace::raygen::random_rays(&scene.bounds, args.count, args.seed),
     };

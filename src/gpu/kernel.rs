@@ -19,7 +19,7 @@ pub struct Kernel {
     pub set_layout: vk::DescriptorSetLayout,
     /// Number of bindings of set 0 (storage buffers, except `texel_buffers`).
     pub bindings: u32,
-    /// Bindings that are uniform texel buffers, with their view formats.
+    /// Bindings that are storage texel buffers, with their view formats.
     pub texel_buffers: Vec<(u32, vk::Format)>,
     /// Bindings that are acceleration structures (ray queries).
     pub acceleration_structures: Vec<u32>,
@@ -50,7 +50,7 @@ pub struct KernelDesc<'a> {
     /// Subgroup operations the kernel uses; a device without them in compute
     /// shaders gets `Error::DeviceLimit` naming the missing ones.
     pub required_subgroup_operations: vk::SubgroupFeatureFlags,
-    /// Bindings that are uniform texel buffers (`usamplerBuffer` etc.) instead of
+    /// Bindings that are storage texel buffers (read-only `uimageBuffer` etc.) instead of
     /// storage buffers, with the format of the view a [`BufferSet`] makes for them.
     pub texel_buffers: &'a [(u32, vk::Format)],
     /// Bindings that are acceleration structures (`accelerationStructureEXT` of
@@ -257,11 +257,11 @@ impl Drop for Kernel {
     }
 }
 
-/// The descriptor type of `binding`: a uniform texel buffer when `texel_buffers`
+/// The descriptor type of `binding`: a storage texel buffer when `texel_buffers`
 /// names it, an acceleration structure when `structures` does, else a storage buffer.
 fn descriptor_type(texel_buffers: &[(u32, vk::Format)], structures: &[u32], binding: u32) -> vk::DescriptorType {
     if texel_buffers.iter().any(|(b, _)| *b == binding) {
-        vk::DescriptorType::UNIFORM_TEXEL_BUFFER
+        vk::DescriptorType::STORAGE_TEXEL_BUFFER
     } else if structures.contains(&binding) {
         vk::DescriptorType::ACCELERATION_STRUCTURE_KHR
     } else {
@@ -315,7 +315,7 @@ impl BufferSet {
     ///
     /// # Safety
     /// Each range's buffer must be a live buffer of this device created with
-    /// `STORAGE_BUFFER` usage (`UNIFORM_TEXEL_BUFFER` for the kernel's texel-buffer
+    /// `STORAGE_BUFFER` usage (`STORAGE_TEXEL_BUFFER` for the kernel's texel-buffer
     /// bindings) and at least `offset + range` bytes, bound to memory,
     /// and stay alive while the set is used by any command buffer.
     pub unsafe fn from_ranges(ctx: &Arc<GpuContext>, kernel: &Kernel, ranges: &[BufferRange]) -> Result<BufferSet> {
@@ -368,7 +368,7 @@ impl BufferSet {
         let structure_count = kernel.acceleration_structures.len() as u32;
         let sizes: Vec<vk::DescriptorPoolSize> = [
             (vk::DescriptorType::STORAGE_BUFFER, kernel.bindings - texel_count - structure_count),
-            (vk::DescriptorType::UNIFORM_TEXEL_BUFFER, texel_count),
+            (vk::DescriptorType::STORAGE_TEXEL_BUFFER, texel_count),
             (vk::DescriptorType::ACCELERATION_STRUCTURE_KHR, structure_count),
         ]
         .into_iter()
@@ -451,7 +451,7 @@ impl BufferSet {
                     }
                     match views.iter().find(|(b, _)| *b == i as u32) {
                         Some((_, view)) => {
-                            write.descriptor_type(vk::DescriptorType::UNIFORM_TEXEL_BUFFER).texel_buffer_view(view)
+                            write.descriptor_type(vk::DescriptorType::STORAGE_TEXEL_BUFFER).texel_buffer_view(view)
                         }
                         None => write.descriptor_type(vk::DescriptorType::STORAGE_BUFFER).buffer_info(info),
                     }
@@ -485,6 +485,14 @@ pub(crate) fn check_texel_range(ctx: &GpuContext, what: &str, r: &BufferRange, f
     };
     if r.buffer == vk::Buffer::null() {
         return Err(Error::InvalidInput(format!("{what}: the buffer is VK_NULL_HANDLE")));
+    }
+    // SAFETY: the physical device belongs to the context's instance.
+    let props = unsafe { ctx.instance.get_physical_device_format_properties(ctx.physical_device, format) };
+    if !props.buffer_features.contains(vk::FormatFeatureFlags::STORAGE_TEXEL_BUFFER) {
+        return Err(Error::DeviceLimit(format!(
+            "{what}: {} cannot read {format:?} as a storage texel buffer (VK_FORMAT_FEATURE_STORAGE_TEXEL_BUFFER_BIT)",
+            info.name
+        )));
     }
     if r.offset != 0 || r.range == 0 || r.range == vk::WHOLE_SIZE || r.range % bytes != 0 {
         return Err(Error::InvalidInput(format!(
