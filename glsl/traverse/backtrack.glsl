@@ -24,9 +24,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Closest best, i
     uvec2 exit_plane = EXACT_PLANE;
     uvec2 t1_plane = NO_PLANE;  // ROBUST: the plane the segment ends at, when known
     uvec2 crossed = NO_PLANE;   // ROBUST: the plane the last leaf was left through
-    // ROBUST: finish with exact restarts from t0. One call site after the loop, so
-    // the kernel holds one copy of that code.
-    bool fallback = false;
+    bool fallback = false;  // ROBUST: finish with exact restarts from t0 (after the loop)
     // While-while form (see stack.glsl): descend to a leaf, then visit it.
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -94,14 +92,7 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Closest best, i
         exit_plane = ANY_PLANE;
         c.restarts += 1u;
     }
-    if (fallback) {
-        // The fast pass leaves the exact restarts to the careful one (see careful_pass).
-        if (!careful_pass) {
-            best.needs_careful = true;
-            return true;
-        }
-        return trace_restart_exact(r, t_scene0, t1_scene, true, t0, step, best, c);
-    }
+    if (fallback) return trace_fallback_exact(r, t_scene0, t1_scene, t0, step, best, c);
     return false;
 }
 

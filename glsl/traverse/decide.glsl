@@ -1,6 +1,6 @@
 // The child decision at an interior node (decide_children), the planes a
-// segment may end at, and the restart point of the t-value restarts. CPU twin:
-// src/kdtree/traverse/decide.rs.
+// segment may end at, and the restart point and state of the t-value restarts.
+// CPU twin: src/kdtree/traverse/decide.rs.
 //
 // Expects from its includer: the specialization constant ROBUST and what
 // segment.glsl expects.
@@ -36,6 +36,23 @@ const uvec2 EXACT_PLANE = uvec2(5u, 0u);
 
 uvec2 node_plane(uvec2 n) {
     return uvec2(node_axis(n), n.x);
+}
+
+// Restart behind the leaf just left (`restart`, `push-down`, the short stacks):
+// the segment becomes [restart point, the nearer of the scene exit and `reach`],
+// and ties at its start follow the plane the leaf was left through (any plane
+// when that one is not known). The restart state is each variant's own three
+// variables, not a struct, which lavapipe runs much slower (docs/BENCH.md):
+// `t0_restart` (where the segment started at the last restart), `exit_plane`
+// (the tie rule's) and `t1_plane` (where the current segment ends).
+// The caller sets the node to descend from and counts the restart.
+void restart_after_leaf(float t1_scene, float reach, inout float t0, inout float t1, inout float t0_restart,
+                        inout uvec2 exit_plane, inout uvec2 t1_plane) {
+    t0 = restart_point(t1, t0_restart);
+    t0_restart = t0;
+    t1 = min(t1_scene, reach);
+    exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
+    t1_plane = NO_PLANE;
 }
 
 // Which children of an interior node the segment [t0, t1] needs.

@@ -51,13 +51,9 @@ bool trace_push_down(TraceRay r, float t0, float t1_scene, inout Closest best, i
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
-        t0 = restart_point(t1, t0_restart);
-        t0_restart = t0;
-        t1 = min(t1_scene, best_reach(best));
+        restart_after_leaf(t1_scene, best_reach(best), t0, t1, t0_restart, exit_plane, t1_plane);
         node = restart_node;
         push_down = true;
-        exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
-        t1_plane = NO_PLANE;
         c.restarts += 1u;
     }
     return false;

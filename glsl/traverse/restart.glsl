@@ -89,6 +89,19 @@ bool trace_restart_exact(TraceRay r, float t0, float t1, bool use_push_down, flo
     return false;
 }
 
+// The fallback of robust `backtrack` and `ropes`, which met a decision they
+// cannot take in f32: finish with exact restarts, leaves before `t_from` done.
+// The fast pass leaves that to the careful one (see careful_pass). Called once
+// after each variant's loop, so the kernel holds one copy of this code.
+bool trace_fallback_exact(TraceRay r, float t0_scene, float t1_scene, float t_from, uint step,
+                          inout Closest best, inout TraceCounters c) {
+    if (!careful_pass) {
+        best.needs_careful = true;
+        return true;
+    }
+    return trace_restart_exact(r, t0_scene, t1_scene, true, t_from, step, best, c);
+}
+
 bool trace_restart(TraceRay r, float t0, float t1_scene, inout Closest best, inout TraceCounters c) {
     if (ROBUST) return trace_restart_exact(r, t0, t1_scene, false, -3.40282347e38, 0u, best, c);
     uint node = 0u;
@@ -124,12 +137,8 @@ bool trace_restart(TraceRay r, float t0, float t1_scene, inout Closest best, ino
         if (leaf == LEAF_CUT) return false;
         if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
         // Restart from the root behind this leaf.
-        t0 = restart_point(t1, t0_restart);
-        t0_restart = t0;
-        t1 = min(t1_scene, best_reach(best));
+        restart_after_leaf(t1_scene, best_reach(best), t0, t1, t0_restart, exit_plane, t1_plane);
         node = 0u;
-        exit_plane = t1_plane.x == NO_PLANE.x ? ANY_PLANE : t1_plane;
-        t1_plane = NO_PLANE;
         c.restarts += 1u;
     }
     return false;

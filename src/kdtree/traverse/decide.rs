@@ -1,6 +1,6 @@
 //! The child decision at an interior node ([`decide_children`]), the planes a
-//! segment may end at, and the restart point of the t-value restarts. Twin of
-//! `glsl/traverse/decide.glsl`.
+//! segment may end at, and the restart point and state of the t-value restarts.
+//! Twin of `glsl/traverse/decide.glsl`.
 
 use super::segment::{flat_side, glsl_max, glsl_min, is_flat, plane_t, TraceRay};
 use crate::kdtree::KdNode;
@@ -47,6 +47,30 @@ pub(super) enum ExitPlane {
 /// The split plane of an interior node.
 pub(super) fn node_plane(n: KdNode) -> ExitPlane {
     ExitPlane::Plane(n.axis(), n.split().to_bits())
+}
+
+/// Twin of `restart_after_leaf` in decide.glsl: restart behind the leaf just left
+/// (`restart`, `push-down`, the short stacks). The segment [`t0`, `t1`] becomes
+/// [restart point, the nearer of the scene exit and `reach`], and ties at its
+/// start follow the plane the leaf was left through (any plane when that one is
+/// not known). The restart state is each variant's own three variables:
+/// `t0_restart` (where the segment started at the last restart), `exit_plane`
+/// (the tie rule's) and `t1_plane` (where the current segment ends). The caller
+/// sets the node to descend from and counts the restart.
+pub(super) fn restart_after_leaf(
+    t1_scene: f32,
+    reach: f32,
+    t0: &mut f32,
+    t1: &mut f32,
+    t0_restart: &mut f32,
+    exit_plane: &mut ExitPlane,
+    t1_plane: &mut ExitPlane,
+) {
+    *t0 = restart_point(*t1, *t0_restart);
+    *t0_restart = *t0;
+    *t1 = glsl_min(t1_scene, reach);
+    *exit_plane = if *t1_plane == ExitPlane::None { ExitPlane::Any } else { *t1_plane };
+    *t1_plane = ExitPlane::None;
 }
 
 /// Twin of `decide_children` in decide.glsl: (visit, near, far, t_split).

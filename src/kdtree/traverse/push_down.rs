@@ -1,9 +1,8 @@
 //! `push-down`: kd-restart from the push-down node. Twin of
 //! `glsl/traverse/push_down.glsl`.
 
-use super::decide::{decide_children, node_plane, restart_point, ExitPlane, Visit};
+use super::decide::{decide_children, node_plane, restart_after_leaf, ExitPlane, Visit};
 use super::restart::trace_restart_exact;
-use super::segment::glsl_min;
 use super::State;
 use crate::consts::MAX_TRAVERSAL_STEPS;
 
@@ -45,13 +44,9 @@ pub(super) fn trace_push_down(s: &mut State, mut t0: f32, t1_scene: f32) -> bool
         if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
-        t0 = restart_point(t1, t0_restart);
-        t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.reach());
+        restart_after_leaf(t1_scene, s.reach(), &mut t0, &mut t1, &mut t0_restart, &mut exit_plane, &mut t1_plane);
         node = restart_node;
         push_down = true;
-        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
-        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false

@@ -1,9 +1,8 @@
 //! `restart` (kd-restart) and the exact restarts of the robust variants. Twin of
 //! `glsl/traverse/restart.glsl`.
 
-use super::decide::{decide_children, node_plane, restart_point, ExitPlane, Visit, T_EPS};
+use super::decide::{decide_children, node_plane, restart_after_leaf, ExitPlane, Visit, T_EPS};
 use super::seek::{stack_successor, Successor};
-use super::segment::glsl_min;
 use super::State;
 use crate::consts::MAX_TRAVERSAL_STEPS;
 
@@ -93,12 +92,8 @@ pub(super) fn trace_restart(s: &mut State, mut t0: f32, t1_scene: f32) -> bool {
         if s.leaf(n, t1) || t1 >= t1_scene {
             return true;
         }
-        t0 = restart_point(t1, t0_restart);
-        t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.reach());
+        restart_after_leaf(t1_scene, s.reach(), &mut t0, &mut t1, &mut t0_restart, &mut exit_plane, &mut t1_plane);
         node = 0;
-        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
-        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false

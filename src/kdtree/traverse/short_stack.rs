@@ -1,11 +1,10 @@
 //! `short-stack` and `push-down-short-stack`. Twin of
 //! `glsl/traverse/short_stack.glsl`.
 
-use super::decide::{decide_children, node_plane, restart_point, ExitPlane, Visit};
+use super::decide::{decide_children, node_plane, restart_after_leaf, ExitPlane, Visit};
 use super::leaf::starts_before;
 use super::node::Counters;
 use super::seek::{stack_successor, Successor};
-use super::segment::glsl_min;
 use super::State;
 use crate::consts::{MAX_SHORT_STACK, MAX_TRAVERSAL_STEPS};
 
@@ -105,13 +104,9 @@ pub(super) fn trace_short_stack(s: &mut State, mut t0: f32, t1_scene: f32, size:
         if t1 >= t1_scene {
             return true;
         }
-        t0 = restart_point(t1, t0_restart);
-        t0_restart = t0;
-        t1 = glsl_min(t1_scene, s.reach());
+        restart_after_leaf(t1_scene, s.reach(), &mut t0, &mut t1, &mut t0_restart, &mut exit_plane, &mut t1_plane);
         node = restart_node;
         push_down = use_push_down;
-        exit_plane = if t1_plane == ExitPlane::None { ExitPlane::Any } else { t1_plane };
-        t1_plane = ExitPlane::None;
         s.c.restarts += 1;
     }
     false
