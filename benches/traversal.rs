@@ -24,6 +24,7 @@ fn main() {
         repeat: 3,
         reference_sample: 200,
         traversals: Vec::new(),
+        orders: vec![kdtrace::trace::RayOrder::AsGiven],
         cpu_traversals: expand_traversals("all", &[1, 3, 8], &[1], &[true, false], None).expect("traversals"),
         builders: vec!["default".into()],
         kinds: RayKind::ALL.to_vec(),

@@ -56,6 +56,8 @@ layout(std430, set = 0, binding = BINDING_ROPES) readonly buffer Ropes { uint ro
 // The rays the fast pass leaves to the careful pass: the indirect dispatch's
 // arguments (x, y, z), their count, then their indices (src/consts.rs).
 layout(std430, set = 0, binding = BINDING_CAREFUL) coherent buffer Careful { uint careful[]; };
+// The coherent order of the batch, when params.ordered (glsl/order_rays.comp).
+layout(std430, set = 0, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
 
@@ -275,5 +277,6 @@ void main() {
                      : gl_GlobalInvocationID.x;
     uint count = listed ? careful[3] : params.ray_count;
     if (id >= count) return;
-    trace_ray(listed ? careful[CAREFUL_HEADER_WORDS + id] : id);
+    // The careful pass lists ray indices; an ordered batch traces ray order[id].
+    trace_ray(listed ? careful[CAREFUL_HEADER_WORDS + id] : (params.ordered != 0u ? order[id] : id));
 }

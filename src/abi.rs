@@ -57,8 +57,9 @@ gpu_struct! {
         /// 0: the kernel uses it as a zero its compiler cannot fold (see
         /// `shift_to_scene` in glsl/trace.comp).
         pub pad0: u32,
-        /// Padding to 48 bytes (0).
-        pub pad1: u32,
+        /// 1: invocation `i` traces ray `order[i]` of the order binding
+        /// (`RayOrder::Coherent`); 0: ray `i`.
+        pub ordered: u32,
         /// Padding to 48 bytes (0).
         pub pad2: u32,
     }

@@ -105,8 +105,37 @@ pub const BINDING_ROPES: u32 = 8;
 /// `u32` words, `CAREFUL_HEADER_WORDS` of header (`vkCmdDispatchIndirect` arguments
 /// x, y, z, then the count), then the indices of the rays the fast pass left.
 pub const BINDING_CAREFUL: u32 = 9;
+/// Binding of the coherent order of the rays (`u32` ray indices, read-only; a
+/// dummy unless `TraceParams::ordered`): the trace kernel's invocation `i` traces
+/// ray `order[i]`.
+pub const BINDING_ORDER: u32 = 10;
 /// Number of bindings of the trace kernel.
-pub const TRACE_BINDINGS: u32 = 10;
+pub const TRACE_BINDINGS: u32 = 11;
+
+// The coherent order of a batch (`glsl/order_rays.comp`, `RayOrder::Coherent`).
+/// Bits per axis of the origin's cell in the scene box (a Morton code of 3 × this).
+pub const ORDER_CELL_BITS: u32 = 4;
+/// Workgroup size of the ordering kernel (its scan step runs one workgroup).
+pub const ORDER_WORKGROUP_SIZE: u32 = 256;
+/// Buckets of the counting sort: 8 octants × the cells, then one more run of
+/// `ORDER_WORKGROUP_SIZE` whose last bucket holds the invalid rays.
+pub const ORDER_BUCKETS: u32 = (8 << (3 * ORDER_CELL_BITS)) + ORDER_WORKGROUP_SIZE;
+/// Specialization constant id of the ordering kernel's step.
+pub const ORDER_SPEC_STEP: u32 = 0;
+/// Step: count the rays of each bucket.
+pub const ORDER_STEP_COUNT: u32 = 0;
+/// Step: the buckets' start offsets (one workgroup).
+pub const ORDER_STEP_SCAN: u32 = 1;
+/// Step: each ray's place in the order.
+pub const ORDER_STEP_SCATTER: u32 = 2;
+/// Binding of the ordering kernel's rays (as the trace kernel's).
+pub const ORDER_BINDING_RAYS: u32 = 0;
+/// Binding of its bucket counts and offsets (`ORDER_BUCKETS` `u32`).
+pub const ORDER_BINDING_BUCKETS: u32 = 1;
+/// Binding of the order it writes (`u32` per ray).
+pub const ORDER_BINDING_LIST: u32 = 2;
+/// Number of bindings of the ordering kernel.
+pub const ORDER_BINDINGS: u32 = 3;
 // Descriptor bindings of the ray-query kernel (`glsl/trace_ray_query.comp`, set 0).
 /// Binding of the driver's top-level acceleration structure over the scene.
 pub const RQ_BINDING_SCENE: u32 = 0;
@@ -212,6 +241,17 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("BINDING_PARENTS", BINDING_PARENTS),
     ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
     ("BINDING_ROPES", BINDING_ROPES),
+    ("BINDING_ORDER", BINDING_ORDER),
+    ("ORDER_CELL_BITS", ORDER_CELL_BITS),
+    ("ORDER_WORKGROUP_SIZE", ORDER_WORKGROUP_SIZE),
+    ("ORDER_BUCKETS", ORDER_BUCKETS),
+    ("ORDER_SPEC_STEP", ORDER_SPEC_STEP),
+    ("ORDER_STEP_COUNT", ORDER_STEP_COUNT),
+    ("ORDER_STEP_SCAN", ORDER_STEP_SCAN),
+    ("ORDER_STEP_SCATTER", ORDER_STEP_SCATTER),
+    ("ORDER_BINDING_RAYS", ORDER_BINDING_RAYS),
+    ("ORDER_BINDING_BUCKETS", ORDER_BINDING_BUCKETS),
+    ("ORDER_BINDING_LIST", ORDER_BINDING_LIST),
     ("BINDING_CAREFUL", BINDING_CAREFUL),
     ("RQ_BINDING_SCENE", RQ_BINDING_SCENE),
     ("RQ_BINDING_PRIM_IDS", RQ_BINDING_PRIM_IDS),

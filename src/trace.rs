@@ -40,14 +40,22 @@
 //! [`Tracer::record_trace`] records into `cmd` the trace of `count` rays ([`Ray`],
 //! 32 bytes each) read from a range of your buffer, writing `count` hits ([`Hit`],
 //! 16 bytes each) into a range of another (or of the same buffer, not
-//! overlapping). It never submits, waits or allocates memory. With the
+//! overlapping). It never submits or waits, but it allocates the small buffers of
+//! the binding it makes (the careful pass's list; with [`RayOrder::Coherent`] the
+//! order and its buckets): a renderer makes a binding once with [`Tracer::bind`]
+//! and records it each frame with [`Tracer::record_binding`], which allocates
+//! nothing. With the
 //! robustness measures on and single rays (the default) it records two compute
 //! dispatches: a fast pass, and an indirect careful pass over the rays the fast
 //! one listed in the binding's own list buffer, which it empties first
 //! (`vkCmdUpdateBuffer`), with global memory barriers between these steps that
 //! order them (and an earlier recording's careful pass before the list is
-//! emptied again). Otherwise it records one dispatch and no barrier. Synchronisation
-//! of your buffers is yours, as follows.
+//! emptied again). Otherwise it records one dispatch and no barrier. With
+//! [`RayOrder::Coherent`] the trace is preceded by the ordering of the rays: a
+//! `vkCmdFillBuffer` of the binding's bucket buffer and three small dispatches
+//! (count, scan, place), each followed by a global memory barrier, and one before
+//! the fill that orders an earlier recording's use of the binding's buffers.
+//! Synchronisation of your buffers is yours, as follows.
 //!
 //! - **Before**: make your writes of the rays available to the compute shader
 //!   stage, and finish earlier accesses of the hit range, e.g. a
@@ -101,12 +109,14 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_PARENTS,
+    BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_ORDER, BINDING_PARENTS,
     BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY,
-    COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, PASS_CAREFUL,
-    PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, RQ_BINDINGS, RQ_BINDING_HITS, RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS,
-    RQ_BINDING_SCENE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH,
-    TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES, ORDER_BINDINGS,
+    ORDER_BINDING_BUCKETS, ORDER_BINDING_LIST, ORDER_BUCKETS, ORDER_STEP_COUNT, ORDER_STEP_SCAN, ORDER_STEP_SCATTER,
+    ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, PRIM_INCOMPLETE, RQ_BINDINGS, RQ_BINDING_HITS,
+    RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS, RQ_BINDING_SCENE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
+    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
+    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -128,18 +138,34 @@ pub struct TraceOptions {
     pub traversal: Traversal,
     /// Write per-ray counters (a specialization constant: no cost when off).
     pub counters: bool,
+    /// The order the rays are traced in (hits are written in ray order either way).
+    pub order: RayOrder,
+}
+
+/// The order a batch is traced in. Hits and counters are the same in both: each
+/// ray's trace is its own; the order changes how coherent a subgroup's rays are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum RayOrder {
+    /// The order of the ray range (camera rays in Morton order are coherent already).
+    #[default]
+    AsGiven,
+    /// Sorted on the device first, by direction octant and origin cell
+    /// (`glsl/order_rays.comp`: three small dispatches and a 4-byte index per ray,
+    /// inside the same recording): for incoherent batches such as random or
+    /// diffuse rays. kd-tree backend only.
+    Coherent,
 }
 
 impl Default for TraceOptions {
     fn default() -> Self {
-        TraceOptions { traversal: Traversal::closest(Variant::Stack), counters: false }
+        TraceOptions { traversal: Traversal::closest(Variant::Stack), counters: false, order: RayOrder::AsGiven }
     }
 }
 
 impl TraceOptions {
-    /// Closest hit with `variant` (short stack of 3), counters off.
+    /// Closest hit with `variant` (short stack of 3), counters off, rays as given.
     pub fn variant(variant: Variant) -> Self {
-        TraceOptions { traversal: Traversal::closest(variant), counters: false }
+        TraceOptions { traversal: Traversal::closest(variant), ..Default::default() }
     }
 }
 
@@ -329,18 +355,57 @@ pub struct TracePipelines {
     /// By backend, traversal (normalized: settings a kernel ignores are reset)
     /// and counters; bindings refer to kernels by their index here.
     kernels: Vec<((Backend, Traversal, bool), TraceKernels)>,
+    /// The ordering kernel's three steps (`RayOrder::Coherent`), compiled on first use.
+    order: Option<Arc<[Kernel; 3]>>,
 }
 
 impl TracePipelines {
     /// No pipelines yet, for `ctx`.
     pub fn new(ctx: &Arc<GpuContext>) -> TracePipelines {
-        TracePipelines { ctx: ctx.clone(), kernels: Vec::new() }
+        TracePipelines { ctx: ctx.clone(), kernels: Vec::new(), order: None }
     }
 
     /// Compiles the pipelines that tracing with `backend` and `options` needs
     /// (nothing when they are there). The errors of [`Tracer::prepare`].
     pub fn prepare(&mut self, backend: Backend, options: &TraceOptions) -> Result<()> {
+        if options.order == RayOrder::Coherent {
+            self.order_kernels(backend)?;
+        }
         self.kernel(backend, options.traversal, options.counters).map(|_| ())
+    }
+
+    /// The ordering kernel's steps (count, scan, scatter), compiled on first use.
+    fn order_kernels(&mut self, backend: Backend) -> Result<Arc<[Kernel; 3]>> {
+        if backend != Backend::KdTree {
+            return Err(Error::InvalidInput(
+                "RayOrder::Coherent is for the kd-tree backend (the ray-query kernel traces rays as given)".into(),
+            ));
+        }
+        if let Some(k) = &self.order {
+            return Ok(k.clone());
+        }
+        let kernel = |step: u32| {
+            // One specialization constant, ORDER_SPEC_STEP (id 0).
+            let spec = [step];
+            Kernel::new(
+                &self.ctx,
+                &KernelDesc {
+                    name: "order_rays",
+                    spirv: shaders::ORDER_RAYS,
+                    bindings: ORDER_BINDINGS,
+                    push_constant_size: std::mem::size_of::<TraceParams>() as u32,
+                    spec_constants: &spec,
+                    workgroup_size: ORDER_WORKGROUP_SIZE,
+                    required_subgroup_size: None,
+                    texel_buffers: &[],
+                    acceleration_structures: &[],
+                    required_subgroup_operations: vk::SubgroupFeatureFlags::empty(),
+                },
+            )
+        };
+        let kernels = Arc::new([kernel(ORDER_STEP_COUNT)?, kernel(ORDER_STEP_SCAN)?, kernel(ORDER_STEP_SCATTER)?]);
+        self.order = Some(kernels.clone());
+        Ok(kernels)
     }
 
     /// The index of the kernels of `backend`, `traversal` and `counters`,
@@ -463,11 +528,23 @@ pub struct TraceBinding {
     set: BufferSet,
     /// The careful pass's list (robust single rays): indirect arguments, count, ray indices.
     careful: Option<Buffer>,
+    /// `RayOrder::Coherent`: the ordering kernels, their descriptor set, the bucket
+    /// counts and the order.
+    order: Option<OrderPass>,
     kernel: usize,
     pipeline: vk::Pipeline,
     generation: u64,
     capacity: u32,
     options: TraceOptions,
+}
+
+/// The ordering dispatches of a binding (`RayOrder::Coherent`).
+struct OrderPass {
+    kernels: Arc<[Kernel; 3]>,
+    set: BufferSet,
+    buckets: Buffer,
+    /// The order, bound in both sets.
+    _list: Buffer,
 }
 
 impl TraceBinding {
@@ -695,6 +772,10 @@ impl Tracer {
             _ => {}
         }
         let kernel = self.pipelines.kernel(self.backend(), options.traversal, options.counters)?;
+        let order_kernels = match options.order {
+            RayOrder::AsGiven => None,
+            RayOrder::Coherent => Some(self.pipelines.order_kernels(self.backend())?),
+        };
         let uses_links = self.backend() == Backend::KdTree && options.traversal.variant.uses_links();
         if uses_links && matches!(&self.scene, TracerScene::KdTree(s) if s.links.is_none()) {
             if !upload {
@@ -757,6 +838,7 @@ impl Tracer {
                 return Ok(TraceBinding {
                     set,
                     careful: None,
+                    order: None,
                     kernel,
                     pipeline: k.main.pipeline,
                     generation: self.generation,
@@ -793,12 +875,38 @@ impl Tracer {
             }
             None => None,
         };
+        let order = match order_kernels {
+            None => None,
+            Some(kernels) => {
+                let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+                let bytes = ORDER_BUCKETS as u64 * WORD_BYTES;
+                let buckets = Buffer::new(
+                    &self.ctx,
+                    bytes,
+                    usage | vk::BufferUsageFlags::TRANSFER_DST,
+                    MemoryLocation::GpuOnly,
+                    "ray-order buckets",
+                )?;
+                let list =
+                    Buffer::new(&self.ctx, capacity as u64 * WORD_BYTES, usage, MemoryLocation::GpuOnly, "ray order")?;
+                check_range(&self.ctx, "ray order", &BufferRange::whole(&list))?;
+                ranges[BINDING_ORDER as usize] = BufferRange::whole(&list);
+                let mut order_ranges = [rays; ORDER_BINDINGS as usize];
+                order_ranges[ORDER_BINDING_BUCKETS as usize] = BufferRange::whole(&buckets);
+                order_ranges[ORDER_BINDING_LIST as usize] = BufferRange::whole(&list);
+                // SAFETY: the bucket and order buffers are this tracer's; the caller
+                // vouches for `rays`. The three steps share one binding layout.
+                let set = unsafe { BufferSet::from_ranges(&self.ctx, &kernels[0], &order_ranges)? };
+                Some(OrderPass { kernels, set, buckets, _list: list })
+            }
+        };
         // SAFETY: the scene, dummy and list buffers are this tracer's; the caller
         // vouches for `rays`, `hits` and `counters`.
         let set = unsafe { BufferSet::from_ranges(&self.ctx, &k.main, &ranges)? };
         Ok(TraceBinding {
             set,
             careful,
+            order,
             kernel,
             pipeline: k.main.pipeline,
             generation: self.generation,
@@ -847,7 +955,7 @@ impl Tracer {
             scene_max: [b.max.x, b.max.y, b.max.z, 0.0],
             ray_count: count,
             pad0: 0,
-            pad1: 0,
+            ordered: binding.order.is_some() as u32,
             pad2: 0,
         };
         let push = bytemuck::bytes_of(&params);
@@ -869,6 +977,36 @@ impl Tracer {
         };
         // SAFETY: forwarded from the caller; the list buffer lives in the binding.
         unsafe {
+            if let Some(order) = &binding.order {
+                // The coherent order: count the buckets, scan them, place the rays.
+                // The fill waits for an earlier recording's passes over the buffers.
+                barrier(
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::AccessFlags::SHADER_WRITE,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                );
+                device.cmd_fill_buffer(cmd, order.buckets.buffer, 0, vk::WHOLE_SIZE, 0);
+                barrier(
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                );
+                let [count_step, scan_step, scatter_step] = &*order.kernels;
+                let step = |k: &Kernel, threads: u32| {
+                    k.record_dispatch(cmd, order.set.set, push, threads);
+                    barrier(
+                        vk::PipelineStageFlags::COMPUTE_SHADER,
+                        vk::AccessFlags::SHADER_WRITE,
+                        vk::PipelineStageFlags::COMPUTE_SHADER,
+                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                    );
+                };
+                step(count_step, count);
+                step(scan_step, ORDER_WORKGROUP_SIZE);
+                step(scatter_step, count);
+            }
             let (Some(careful), Some(list)) = (&kernels.careful, &binding.careful) else {
                 kernels.main.record_dispatch(cmd, binding.set.set, push, count);
                 return;

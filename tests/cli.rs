@@ -157,6 +157,33 @@ fn counters_csv_heatmap_and_any_hit() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(kdtrace::io::read_hits(&sorted_hits).unwrap(), closest, "--sort writes hits in file order");
+    let o = kdtrace(&[
+        "trace",
+        scene.to_str().unwrap(),
+        rays.to_str().unwrap(),
+        "-o",
+        sorted_hits.to_str().unwrap(),
+        "--traversal",
+        "short-stack",
+        "--stack-size",
+        "2",
+        "--device-order",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(kdtrace::io::read_hits(&sorted_hits).unwrap(), closest, "--device-order writes hits in file order");
+    let o = kdtrace(&[
+        "trace",
+        scene.to_str().unwrap(),
+        rays.to_str().unwrap(),
+        "-o",
+        "/dev/null",
+        "--backend",
+        "ray-query",
+        "--device-order",
+    ]);
+    // (Without the driver's ray query, the error names the missing extension instead.)
+    let e = stderr(&o);
+    assert!(!o.status.success() && (e.contains("kd-tree backend") || e.contains("VK_KHR_ray_query")), "{e}");
     let o =
         kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap(), "--any-hit"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -391,7 +418,8 @@ fn trace_hits_equal_the_library_bit_for_bit() {
         assert!(stderr(&o).contains(&format!("{} invalid", invalid.len())), "{}", stderr(&o));
         let written = kdtrace::io::read_hits(&hit_file).unwrap();
         let traversal = Traversal { robust, ..Traversal::closest(Variant::Stack) };
-        let library = tracer.trace(&rays, &TraceOptions { traversal, counters: false }).unwrap().hits;
+        let library =
+            tracer.trace(&rays, &TraceOptions { traversal, counters: false, ..Default::default() }).unwrap().hits;
         assert_eq!(written.len(), library.len());
         for (i, (a, b)) in written.iter().zip(&library).enumerate() {
             assert!(bytemuck::bytes_of(a) == bytemuck::bytes_of(b), "ray {i} {:?}: file {a:?}, library {b:?}", rays[i]);

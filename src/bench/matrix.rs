@@ -21,7 +21,7 @@ use crate::kdtree::traverse::{trace_ray, Counters, SceneRef};
 use crate::kdtree::{BuildConfig, Builder, KdTree};
 use crate::scene::{Camera, Scene};
 use crate::stress::{exact_answers, judge_with, Tally};
-use crate::trace::{TraceOptions, Tracer};
+use crate::trace::{RayOrder, TraceOptions, Tracer};
 use crate::traversal::{Traversal, Variant};
 
 /// The builder settings the matrix knows, by name: `sweep` is `default`'s
@@ -88,6 +88,8 @@ pub struct MatrixOptions {
     pub reference_sample: usize,
     /// GPU traversals (closest-hit settings; shadow rays run them any-hit).
     pub traversals: Vec<Traversal>,
+    /// The orders the kd-tree GPU cells trace each batch in (each a cell).
+    pub orders: Vec<RayOrder>,
     /// CPU-twin traversals (single rays; packet width ignored).
     pub cpu_traversals: Vec<Traversal>,
     /// Builder settings, by name.
@@ -119,6 +121,8 @@ pub struct Cell {
     pub builder: String,
     /// The traversal (`None` for Embree and the ray query); `any_hit` set for shadow rays.
     pub traversal: Option<Traversal>,
+    /// The order the batch was traced in (kd-tree GPU cells; `AsGiven` elsewhere).
+    pub order: RayOrder,
     /// Rays traced.
     pub rays: usize,
     /// Seconds to build the acceleration structure (kd-tree, or Embree's commit,
@@ -164,6 +168,9 @@ impl Cell {
         let mut s = self.backend.name().to_string();
         if let Some(t) = &self.traversal {
             s += &format!(" {}", traversal_name(t));
+        }
+        if self.order == RayOrder::Coherent {
+            s += " coherent-order";
         }
         if !self.backend.on_device() {
             s += &format!(" {}t", self.threads);
@@ -301,6 +308,7 @@ pub fn run_scene(
         threads: if backend.on_device() { 0 } else { threads },
         builder: builder.to_string(),
         traversal: None,
+        order: RayOrder::AsGiven,
         rays,
         build_seconds: 0.0,
         upload_seconds: 0.0,
@@ -329,14 +337,18 @@ pub fn run_scene(
             let upload_seconds = start.elapsed().as_secs_f64();
             let tracer = tracer.as_mut().expect("made above");
             for &base in &options.traversals {
-                for batch in batches.iter().filter(|b| !b.rays.is_empty()) {
+                for (batch, &order) in batches
+                    .iter()
+                    .filter(|b| !b.rays.is_empty())
+                    .flat_map(|b| options.orders.iter().map(move |o| (b, o)))
+                {
                     let traversal = Traversal { any_hit: batch.kind.any_hit(), ..base };
-                    progress(&format!("{builder} {} {} rays", traversal_name(&traversal), batch.kind));
-                    let plain = TraceOptions { traversal, counters: false };
+                    progress(&format!("{builder} {} {} rays {order:?}", traversal_name(&traversal), batch.kind));
+                    let plain = TraceOptions { traversal, counters: false, order };
                     let start = Instant::now();
                     tracer.prepare(&plain)?;
                     let pipeline_seconds = start.elapsed().as_secs_f64();
-                    let counted = tracer.trace(&batch.rays, &TraceOptions { traversal, counters: true })?;
+                    let counted = tracer.trace(&batch.rays, &TraceOptions { traversal, counters: true, order })?;
                     let mut gpu_times = Vec::new();
                     let (result, wall) = timed(options.repeat, || {
                         let r = tracer.trace(&batch.rays, &plain)?;
@@ -346,6 +358,7 @@ pub fn run_scene(
                     gpu_times.remove(0); // the warm-up
                     cells.push(Cell {
                         traversal: Some(traversal),
+                        order,
                         build_seconds,
                         upload_seconds,
                         pipeline_seconds,
@@ -432,6 +445,7 @@ fn run_ray_query(
         let options = TraceOptions {
             traversal: Traversal { any_hit: batch.kind.any_hit(), ..Traversal::closest(Variant::Stack) },
             counters: false,
+            ..Default::default()
         };
         let start = Instant::now();
         tracer.prepare(&options)?;

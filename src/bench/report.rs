@@ -135,7 +135,7 @@ fn snake(name: &str) -> String {
 /// Every cell as CSV, one row per cell, with every verdict's count.
 pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
     let mut text = String::from(
-        "scene,kind,backend,threads,builder,traversal,variant,stack_size,packet_width,robust,any_hit,rays,build_s,upload_s,pipeline_s,trace_s_median,trace_s_min,trace_s_max,call_s_median,rays_per_second,speedup_vs_baseline,nodes_per_ray,leaves_per_ray,triangles_per_ray,sample,agree,disagree_rate,serious,incomplete",
+        "scene,kind,backend,threads,builder,traversal,variant,stack_size,packet_width,robust,any_hit,order,rays,build_s,upload_s,pipeline_s,trace_s_median,trace_s_min,trace_s_max,call_s_median,rays_per_second,speedup_vs_baseline,nodes_per_ray,leaves_per_ray,triangles_per_ray,sample,agree,disagree_rate,serious,incomplete",
     );
     for v in Verdict::ALL {
         text += &format!(",{}", snake(v.name()));
@@ -149,7 +149,7 @@ pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
         };
         let _ = write!(
             text,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.0},{:.4},{n},{l},{tr},{},{},{:.6},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6e},{:.6e},{:.6e},{:.6e},{:.0},{:.4},{n},{l},{tr},{},{},{:.6},{},{}",
             c.scene,
             c.kind,
             c.backend.name(),
@@ -161,6 +161,10 @@ pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
             t.map_or(String::new(), |t| t.packet_width.to_string()),
             t.map_or(String::new(), |t| t.robust.to_string()),
             c.kind.any_hit(),
+            match c.order {
+                crate::trace::RayOrder::AsGiven => "as-given",
+                crate::trace::RayOrder::Coherent => "coherent",
+            },
             c.rays,
             c.build_seconds,
             c.upload_seconds,

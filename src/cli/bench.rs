@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use kdtrace::gpu::GpuContext;
 use kdtrace::render::Primary;
 use kdtrace::scene::Scene;
-use kdtrace::trace::{Backend, Tracer};
+use kdtrace::trace::{Backend, RayOrder, Tracer};
 
 use super::args::{choice, choices, PrimaryKind, TreeArgs};
 use super::common::{backend_context, default_camera, load_and_build, spinner, Stages};
@@ -40,6 +40,11 @@ pub struct BenchArgs {
     pub traversals: String,
     #[arg(long, default_value = "1,3,8")]
     pub stack_sizes: String,
+    /// Orders the kd-tree GPU cells trace each batch in, comma-separated: as-given
+    /// (the batch's order; camera rays in Morton order), coherent (sorted on the
+    /// device first by direction octant and origin cell, inside the timed dispatches).
+    #[arg(long, default_value = "as-given")]
+    pub orders: String,
     #[arg(long, default_value = "1")]
     pub packet_widths: String,
     /// Robustness levels: on, off or on,off.
@@ -164,6 +169,17 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         repeat: args.repeat,
         reference_sample: args.reference_sample,
         traversals: if args.no_gpu || !backends.contains(&Backend::KdTree) { Vec::new() } else { traversals },
+        orders: args
+            .orders
+            .split(',')
+            .map(|s| match s.trim() {
+                "as-given" => Ok(RayOrder::AsGiven),
+                "coherent" => Ok(RayOrder::Coherent),
+                other => {
+                    Err(kdtrace::Error::InvalidInput(format!("--orders: unknown order '{other}' (as-given, coherent)")))
+                }
+            })
+            .collect::<kdtrace::Result<_>>()?,
         cpu_traversals,
         builders: args.builders.split(',').map(|s| s.trim().to_string()).collect(),
         kinds: args.kinds.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<Vec<RayKind>>>()?,

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use kdtrace::kdtree::traverse::Counters;
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::scene::Scene;
-use kdtrace::trace::{Backend, TraceOptions, TracePipelines, Tracer};
+use kdtrace::trace::{Backend, RayOrder, TraceOptions, TracePipelines, Tracer};
 
 use super::args::{TraversalArgs, TreeArgs};
 use super::common::{backend_context, load_and_build, trace_bar, Stages};
@@ -37,6 +37,11 @@ pub struct TraceArgs {
     /// instead of the file's; hits and counters are still written in file order.
     #[arg(long)]
     pub sort: bool,
+    /// Sort the rays on the device before tracing (`RayOrder::Coherent`: direction
+    /// octant, then origin cell; inside the timed dispatches); hits and counters are
+    /// still written in file order. kd-tree backend only.
+    #[arg(long)]
+    pub device_order: bool,
     /// Print the wall time of every stage (rays, OBJ, kd-tree, device, upload,
     /// pipelines, trace, write) on stderr.
     #[arg(long)]
@@ -52,7 +57,8 @@ pub fn trace(args: TraceArgs) -> Result<()> {
     let mut stages = Stages::new(args.timings);
     let rays = kdtrace::io::read_rays(&args.rays)?;
     stages.mark("read the rays");
-    let options = TraceOptions { traversal, counters: args.counters.is_some() };
+    let order = if args.device_order { RayOrder::Coherent } else { RayOrder::AsGiven };
+    let options = TraceOptions { traversal, counters: args.counters.is_some(), order };
     // The device and the pipelines come up on another thread while the scene
     // loads and its tree builds.
     let (device, loaded) = std::thread::scope(|scope| {

@@ -101,7 +101,8 @@ pub fn verify(args: VerifyArgs) -> Result<()> {
             // The ray query has no counters: its node columns stay empty.
             Some((tracer, _)) => {
                 let counted = backend == Backend::KdTree;
-                let result = tracer.trace(rays, &TraceOptions { traversal, counters: counted })?;
+                let result =
+                    tracer.trace(rays, &TraceOptions { traversal, counters: counted, ..Default::default() })?;
                 (result.hits, result.counters.unwrap_or_default())
             }
             None => {

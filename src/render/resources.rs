@@ -474,7 +474,15 @@ impl Resources {
 
 /// The trace options of the closest-hit and the any-hit traces.
 pub(super) fn trace_options(settings: &RenderSettings) -> (TraceOptions, TraceOptions) {
-    let closest = TraceOptions { traversal: Traversal { any_hit: false, ..settings.traversal }, counters: false };
-    let any_hit = TraceOptions { traversal: Traversal { any_hit: true, ..settings.traversal }, counters: false };
+    let closest = TraceOptions {
+        traversal: Traversal { any_hit: false, ..settings.traversal },
+        counters: false,
+        ..Default::default()
+    };
+    let any_hit = TraceOptions {
+        traversal: Traversal { any_hit: true, ..settings.traversal },
+        counters: false,
+        ..Default::default()
+    };
     (closest, any_hit)
 }
