@@ -39,15 +39,8 @@ uint spread3(uint x) {
 }
 
 uint ray_key(uint index) {
-    uvec2 w0 = unpackDouble2x32(ray_words[4u * index + 0u]);
-    uvec2 w1 = unpackDouble2x32(ray_words[4u * index + 1u]);
-    uvec2 w2 = unpackDouble2x32(ray_words[4u * index + 2u]);
-    uvec2 w3 = unpackDouble2x32(ray_words[4u * index + 3u]);
-    Ray ray;
-    ray.origin = uintBitsToFloat(uvec3(w0.x, w0.y, w1.x));
-    ray.tmin = uintBitsToFloat(w1.y);
-    ray.dir = uintBitsToFloat(uvec3(w2.x, w2.y, w3.x));
-    ray.tmax = uintBitsToFloat(w3.y);
+    Ray ray = ray_from_words(ray_words[4u * index], ray_words[4u * index + 1u], ray_words[4u * index + 2u],
+                             ray_words[4u * index + 3u]);
     ray.dir = traced_dir(ray.dir);
     if (!ray_is_valid(ray)) return ORDER_BUCKETS - 1u;
     uvec3 neg = uvec3(lessThan(ray.dir, vec3(0.0)));

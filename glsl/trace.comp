@@ -185,15 +185,8 @@ bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Closest bes
 // that met a pair the f32 tests could not decide is listed for the careful pass
 // instead, and nothing is written for it.
 void trace_ray(uint index) {
-    uvec2 w0 = unpackDouble2x32(ray_words[4u * index + 0u]);
-    uvec2 w1 = unpackDouble2x32(ray_words[4u * index + 1u]);
-    uvec2 w2 = unpackDouble2x32(ray_words[4u * index + 2u]);
-    uvec2 w3 = unpackDouble2x32(ray_words[4u * index + 3u]);
-    Ray ray;
-    ray.origin = uintBitsToFloat(uvec3(w0, w1.x));
-    ray.tmin = uintBitsToFloat(w1.y);
-    ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
-    ray.tmax = uintBitsToFloat(w3.y);
+    Ray ray = ray_from_words(ray_words[4u * index], ray_words[4u * index + 1u], ray_words[4u * index + 2u],
+                             ray_words[4u * index + 3u]);
 
     Closest best = closest_none(ray.tmax);
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);

@@ -151,9 +151,34 @@ pub enum RayOrder {
     AsGiven,
     /// Sorted on the device first, by direction octant and origin cell
     /// (`glsl/order_rays.comp`: three small dispatches and a 4-byte index per ray,
-    /// inside the same recording): for incoherent batches such as random or
-    /// diffuse rays. kd-tree backend only.
+    /// inside the same recording). kd-tree backend only. On lavapipe it pays for
+    /// uniformly random rays on scenes whose tree overflows the caches (bunny 1.12×,
+    /// dragon_200k 1.18×) and costs elsewhere: camera rays and diffuse bounces from
+    /// camera hits are coherent already (docs/BENCH.md, "Ray order on the device").
     Coherent,
+}
+
+impl RayOrder {
+    /// Both orders.
+    pub const ALL: [RayOrder; 2] = [RayOrder::AsGiven, RayOrder::Coherent];
+
+    /// The name on the command line: `as-given` or `coherent`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RayOrder::AsGiven => "as-given",
+            RayOrder::Coherent => "coherent",
+        }
+    }
+}
+
+impl std::str::FromStr for RayOrder {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        RayOrder::ALL
+            .into_iter()
+            .find(|o| o.name() == s)
+            .ok_or_else(|| Error::InvalidInput(format!("unknown ray order '{s}' (as-given, coherent)")))
+    }
 }
 
 impl Default for TraceOptions {

@@ -169,8 +169,8 @@ impl Cell {
         if let Some(t) = &self.traversal {
             s += &format!(" {}", traversal_name(t));
         }
-        if self.order == RayOrder::Coherent {
-            s += " coherent-order";
+        if self.order != RayOrder::AsGiven {
+            s += &format!(" {}-order", self.order.name());
         }
         if !self.backend.on_device() {
             s += &format!(" {}t", self.threads);

@@ -161,10 +161,7 @@ pub fn write_csv(path: &Path, cells: &[Cell]) -> Result<()> {
             t.map_or(String::new(), |t| t.packet_width.to_string()),
             t.map_or(String::new(), |t| t.robust.to_string()),
             c.kind.any_hit(),
-            match c.order {
-                crate::trace::RayOrder::AsGiven => "as-given",
-                crate::trace::RayOrder::Coherent => "coherent",
-            },
+            c.order.name(),
             c.rays,
             c.build_seconds,
             c.upload_seconds,

@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use kdtrace::gpu::GpuContext;
 use kdtrace::render::Primary;
 use kdtrace::scene::Scene;
-use kdtrace::trace::{Backend, RayOrder, Tracer};
+use kdtrace::trace::{Backend, Tracer};
 
 use super::args::{choice, choices, PrimaryKind, TreeArgs};
 use super::common::{backend_context, default_camera, load_and_build, spinner, Stages};
@@ -169,17 +169,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         repeat: args.repeat,
         reference_sample: args.reference_sample,
         traversals: if args.no_gpu || !backends.contains(&Backend::KdTree) { Vec::new() } else { traversals },
-        orders: args
-            .orders
-            .split(',')
-            .map(|s| match s.trim() {
-                "as-given" => Ok(RayOrder::AsGiven),
-                "coherent" => Ok(RayOrder::Coherent),
-                other => {
-                    Err(kdtrace::Error::InvalidInput(format!("--orders: unknown order '{other}' (as-given, coherent)")))
-                }
-            })
-            .collect::<kdtrace::Result<_>>()?,
+        orders: args.orders.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<_>>()?,
         cpu_traversals,
         builders: args.builders.split(',').map(|s| s.trim().to_string()).collect(),
         kinds: args.kinds.split(',').map(|s| s.trim().parse()).collect::<kdtrace::Result<Vec<RayKind>>>()?,
