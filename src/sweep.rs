@@ -77,10 +77,9 @@ pub fn run(
                     let traversal =
                         Traversal { packet_width: width, subgroup_size: size, ..Traversal::closest(variant) };
                     progress(&format!("{kind} {variant} W={width} subgroup {lanes}"));
-                    let counted =
-                        tracer.trace(rays, &TraceOptions { traversal, counters: true, ..Default::default() })?;
+                    let counted = tracer.trace(rays, &TraceOptions::counted(traversal))?;
                     let counters = counted.counters.unwrap_or_default();
-                    let options = TraceOptions { traversal, counters: false, ..Default::default() };
+                    let options = TraceOptions::new(traversal);
                     tracer.trace(rays, &options)?;
                     let mut times: Vec<f64> = (0..repetitions.max(1))
                         .map(|_| tracer.trace(rays, &options).map(|r| r.gpu_seconds.unwrap_or(f64::NAN)))

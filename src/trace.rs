@@ -188,9 +188,19 @@ impl Default for TraceOptions {
 }
 
 impl TraceOptions {
+    /// `traversal`, counters off, rays as given.
+    pub fn new(traversal: Traversal) -> Self {
+        TraceOptions { traversal, ..Default::default() }
+    }
+
+    /// `traversal` with per-ray counters, rays as given.
+    pub fn counted(traversal: Traversal) -> Self {
+        TraceOptions { traversal, counters: true, ..Default::default() }
+    }
+
     /// Closest hit with `variant` (short stack of 3), counters off, rays as given.
     pub fn variant(variant: Variant) -> Self {
-        TraceOptions { traversal: Traversal::closest(variant), ..Default::default() }
+        TraceOptions::new(Traversal::closest(variant))
     }
 }
 

@@ -407,8 +407,7 @@ fn trace_hits_equal_the_library_bit_for_bit() {
         assert!(stderr(&o).contains(&format!("{} invalid", invalid.len())), "{}", stderr(&o));
         let written = kdtrace::io::read_hits(&hit_file).unwrap();
         let traversal = Traversal { robust, ..Traversal::closest(Variant::Stack) };
-        let library =
-            tracer.trace(&rays, &TraceOptions { traversal, counters: false, ..Default::default() }).unwrap().hits;
+        let library = tracer.trace(&rays, &TraceOptions::new(traversal)).unwrap().hits;
         assert_eq!(written.len(), library.len());
         for (i, (a, b)) in written.iter().zip(&library).enumerate() {
             assert!(bytemuck::bytes_of(a) == bytemuck::bytes_of(b), "ray {i} {:?}: file {a:?}, library {b:?}", rays[i]);

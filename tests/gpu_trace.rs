@@ -89,7 +89,7 @@ fn check_scene(
     for traversal in all_traversals() {
         for any_hit in [false, true] {
             let traversal = Traversal { any_hit, ..traversal };
-            let gpu = tracer.trace(&rays, &TraceOptions { traversal, counters: true, ..Default::default() }).unwrap();
+            let gpu = tracer.trace(&rays, &TraceOptions::counted(traversal)).unwrap();
             let gpu_counters = gpu.counters.as_ref().unwrap();
             let mut hits = 0;
             let mut grazing = 0;

@@ -35,8 +35,7 @@ fn check_scene(tracer: &mut Tracer, tree: &KdTree, scene: &Scene, rays: &[Ray], 
             let reference: Vec<Hit> = rays.iter().map(|r| trace_ray(&scene_ref, r, single).0).collect();
             for &packet_width in widths {
                 let traversal = Traversal { packet_width, ..single };
-                let result =
-                    tracer.trace(rays, &TraceOptions { traversal, counters: true, ..Default::default() }).unwrap();
+                let result = tracer.trace(rays, &TraceOptions::counted(traversal)).unwrap();
                 let mut ties = 0;
                 assert_eq!(result.hits.len(), reference.len());
                 for (i, (p, s)) in result.hits.iter().zip(&reference).enumerate() {
@@ -161,7 +160,7 @@ fn packet_wider_than_subgroup_is_refused() {
     let too_wide = ctx.info.max_subgroup_size * 2;
     let traversal = Traversal { packet_width: too_wide, ..Traversal::closest(Variant::Stack) };
     let rays = [Ray::default()];
-    match tracer.trace(&rays, &TraceOptions { traversal, counters: false, ..Default::default() }) {
+    match tracer.trace(&rays, &TraceOptions::new(traversal)) {
         Err(kdtrace::Error::DeviceLimit(m)) => assert!(m.contains("packet width"), "{m}"),
         Err(e) => panic!("unexpected error {e}"),
         Ok(_) => panic!("packet width {too_wide} should be refused"),

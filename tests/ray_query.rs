@@ -278,11 +278,7 @@ fn any_hit_reports_an_occluder_exactly_when_there_is_one() {
     let (lo, size) = (scene.bounds.min, scene.bounds.extent());
     let mut point = || lo + size * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
     let rays: Vec<Ray> = (0..3000).map(|_| (point(), point())).map(|(a, b)| Ray::new(a, b - a, 0.0, 1.0)).collect();
-    let any = TraceOptions {
-        traversal: Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) },
-        counters: false,
-        ..Default::default()
-    };
+    let any = TraceOptions::new(Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) });
     let hits = tracer.trace(&rays, &any).unwrap().hits;
     let closest = tracer.trace(&rays, &TraceOptions::default()).unwrap().hits;
     let tally = judge_batch(&scene.triangles, &rays, &hits, true);

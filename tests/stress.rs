@@ -161,7 +161,7 @@ fn stress_scene(
             let mut all = Tally::default();
             for (category, rays, exacts, stack) in &batches {
                 let hits = if gpu {
-                    tracer.trace(rays, &TraceOptions { traversal, counters: false, ..Default::default() }).unwrap().hits
+                    tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits
                 } else {
                     cpu_hits(&tree, triangles, &links, rays, traversal)
                 };
@@ -206,10 +206,7 @@ fn stress_scene(
         let any = Traversal { any_hit: true, ..traversal };
         let mut shadow = Tally::default();
         for (category, rays, exacts, _) in &batches {
-            let hits = tracer
-                .trace(rays, &TraceOptions { traversal: any, counters: false, ..Default::default() })
-                .unwrap()
-                .hits;
+            let hits = tracer.trace(rays, &TraceOptions::new(any)).unwrap().hits;
             let t = judge_with(triangles, rays, &hits, exacts, true);
             if t.serious() > 0 {
                 failures.push(format!(
@@ -260,10 +257,7 @@ fn stress_deep_trees_and_far_rays() {
                 let label = format!("{name} {}{}", describe(&traversal), if any_hit { " any-hit" } else { "" });
                 println!("\n{label}\n{}", table_header());
                 for (category, rays, exacts, stack) in &batches {
-                    let hits = tracer
-                        .trace(rays, &TraceOptions { traversal, counters: false, ..Default::default() })
-                        .unwrap()
-                        .hits;
+                    let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
                     let t = judge_with(triangles, rays, &hits, exacts, any_hit);
                     if !any_hit && traversal != Traversal::closest(Variant::Stack) {
                         check_same_primitive(&label, category.name(), rays, &hits, stack, exacts, &mut failures);
@@ -332,8 +326,7 @@ fn stress_rays_gpu_equals_cpu_twin() {
         for variant in Variant::ALL {
             for any_hit in [false, true] {
                 let traversal = Traversal { any_hit, ..Traversal::closest(variant) };
-                let gpu =
-                    tracer.trace(&rays, &TraceOptions { traversal, counters: true, ..Default::default() }).unwrap();
+                let gpu = tracer.trace(&rays, &TraceOptions::counted(traversal)).unwrap();
                 let counters = gpu.counters.unwrap();
                 let scene_ref = SceneRef::new(&tree, triangles).with_links(&links);
                 let mut differ = 0;
@@ -408,7 +401,7 @@ fn closed_meshes_have_no_holes() {
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, tris);
         let rays = inside_rays(tris, rays_per_mesh, name.len() as u64);
         for traversal in traversals() {
-            let hits = match tracer.trace(&rays, &TraceOptions { traversal, counters: false, ..Default::default() }) {
+            let hits = match tracer.trace(&rays, &TraceOptions::new(traversal)) {
                 Ok(result) => result.hits,
                 Err(e) => {
                     println!("{name}, {}: {e}", describe(&traversal));
@@ -505,10 +498,7 @@ fn plain_kernels_and_every_short_stack_size() {
             // Robust short stacks of every size: the stack's hits, bit for bit.
             if traversal.variant.uses_short_stack() && traversal.packet_width == 1 {
                 for (category, rays, _, stack) in &batches {
-                    let hits = tracer
-                        .trace(rays, &TraceOptions { traversal, counters: false, ..Default::default() })
-                        .unwrap()
-                        .hits;
+                    let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
                     assert_eq!(hits.len(), stack.len());
                     let differ = hits.iter().zip(stack).filter(|(a, b)| !same_bits(a, b)).count();
                     if differ > 0 {
@@ -523,10 +513,7 @@ fn plain_kernels_and_every_short_stack_size() {
             let traversal = Traversal { robust: false, ..traversal };
             let label = format!("{name} {} plain", describe(&traversal));
             for (category, rays, exacts, _) in &batches {
-                let hits = tracer
-                    .trace(rays, &TraceOptions { traversal, counters: false, ..Default::default() })
-                    .unwrap()
-                    .hits;
+                let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
                 let t = judge_with(triangles, rays, &hits, exacts, false);
                 let serious_allowed = if *category == Category::InTrianglePlane { t.rays / 50 } else { 0 };
                 if t.incomplete > 0 || t.serious() > serious_allowed || t.agreement() < plain_floor(*category) {

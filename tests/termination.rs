@@ -73,7 +73,7 @@ fn check(name: &str, triangles: Vec<[Vec3; 3]>, rays_per_scene: usize) {
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
     let stack: Vec<_> = rays.iter().map(|r| trace_ray(&cpu, r, Variant::Stack).0).collect();
     for traversal in variants() {
-        let gpu = tracer.trace(&rays, &TraceOptions { traversal, counters: false, ..Default::default() }).unwrap();
+        let gpu = tracer.trace(&rays, &TraceOptions::new(traversal)).unwrap();
         let mut differ = 0;
         for (i, ray) in rays.iter().enumerate() {
             let (hit, _) = trace_ray(&cpu, ray, traversal);

@@ -442,11 +442,8 @@ fn run_ray_query(
     let mut cells = Vec::new();
     for batch in batches.iter().filter(|b| !b.rays.is_empty()) {
         progress(&format!("ray query {} rays", batch.kind));
-        let options = TraceOptions {
-            traversal: Traversal { any_hit: batch.kind.any_hit(), ..Traversal::closest(Variant::Stack) },
-            counters: false,
-            ..Default::default()
-        };
+        let options =
+            TraceOptions::new(Traversal { any_hit: batch.kind.any_hit(), ..Traversal::closest(Variant::Stack) });
         let start = Instant::now();
         tracer.prepare(&options)?;
         let pipeline_seconds = start.elapsed().as_secs_f64();

@@ -390,7 +390,7 @@ fn render_heatmap(
     // Morton order: every aligned run of 4^k rays is a square tile, so packets hold neighbours.
     let (rays, pixels) = kdtrace::render::camera_rays_morton(camera, args.width, args.height);
     let bar = trace_bar(rays.len());
-    let options = TraceOptions { traversal, counters: true, ..Default::default() };
+    let options = TraceOptions::counted(traversal);
     let result = tracer.trace_with_progress(&rays, &options, |n| bar.set_position(n as u64))?;
     bar.finish_and_clear();
     let counters = result.counters.context("the tracer returned no counters")?;

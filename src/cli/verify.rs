@@ -101,8 +101,7 @@ pub fn verify(args: VerifyArgs) -> Result<()> {
             // The ray query has no counters: its node columns stay empty.
             Some((tracer, _)) => {
                 let counted = backend == Backend::KdTree;
-                let result =
-                    tracer.trace(rays, &TraceOptions { traversal, counters: counted, ..Default::default() })?;
+                let result = tracer.trace(rays, &TraceOptions { counters: counted, ..TraceOptions::new(traversal) })?;
                 (result.hits, result.counters.unwrap_or_default())
             }
             None => {

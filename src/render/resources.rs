@@ -474,15 +474,7 @@ impl Resources {
 
 /// The trace options of the closest-hit and the any-hit traces.
 pub(super) fn trace_options(settings: &RenderSettings) -> (TraceOptions, TraceOptions) {
-    let closest = TraceOptions {
-        traversal: Traversal { any_hit: false, ..settings.traversal },
-        counters: false,
-        ..Default::default()
-    };
-    let any_hit = TraceOptions {
-        traversal: Traversal { any_hit: true, ..settings.traversal },
-        counters: false,
-        ..Default::default()
-    };
+    let closest = TraceOptions::new(Traversal { any_hit: false, ..settings.traversal });
+    let any_hit = TraceOptions::new(Traversal { any_hit: true, ..settings.traversal });
     (closest, any_hit)
 }
