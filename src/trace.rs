@@ -48,21 +48,32 @@
 //! robustness measures on and single rays (the default) it records two compute
 //! dispatches: a fast pass, and an indirect careful pass over the rays the fast
 //! one listed in the binding's own list buffer, which it empties first
-//! (`vkCmdUpdateBuffer`), with global memory barriers between these steps that
-//! order them (and an earlier recording's careful pass before the list is
-//! emptied again). Otherwise it records one dispatch and no barrier. With
-//! [`RayOrder::Coherent`] the trace is preceded by the ordering of the rays: a
-//! `vkCmdFillBuffer` of the binding's bucket buffer and three small dispatches
-//! (count, scan, place), each followed by a global memory barrier, and one before
-//! the fill that orders an earlier recording's use of the binding's buffers.
-//! Synchronisation of your buffers is yours, as follows.
+//! (`vkCmdUpdateBuffer`), with barriers between these steps that order them
+//! (and an earlier recording's careful pass before the list is emptied again).
+//! Otherwise it records one dispatch and no barrier. With [`RayOrder::Coherent`]
+//! the trace is preceded by the ordering of the rays: a `vkCmdFillBuffer` of the
+//! binding's bucket buffer and three small dispatches (count, scan, place), each
+//! followed by a barrier, and one before the fill that orders an earlier
+//! recording's use of the bucket buffer.
+//!
+//! kdtrace's barriers cover only its own work: they are buffer memory barriers
+//! naming the binding's own buffers (the careful list, the buckets, the order)
+//! and, between the fast and the careful pass, the hit and counter ranges the
+//! fast pass has just written; never a global memory barrier. So they never make
+//! your writes visible to the trace, and a barrier of yours that is missing is
+//! reported by synchronization validation (`SYNC-HAZARD-READ-AFTER-WRITE` on the
+//! ray binding) with every option, not only where the trace records no barrier.
+//! (Like any pipeline barrier they also order execution of all earlier commands;
+//! do not count on that either.) Synchronisation of your buffers is yours, as
+//! follows.
 //!
 //! - **Before**: make your writes of the rays available to the compute shader
 //!   stage, and finish earlier accesses of the hit range, e.g. a
 //!   `vkCmdPipelineBarrier` from the stage that wrote the rays (`COMPUTE_SHADER`
 //!   with `SHADER_WRITE`, `TRANSFER` with `TRANSFER_WRITE`, ...) to
-//!   `COMPUTE_SHADER` with `SHADER_READ | SHADER_WRITE`. Host writes to mapped
-//!   memory are made visible by the submission itself.
+//!   `COMPUTE_SHADER` with `SHADER_READ | SHADER_WRITE`, as a global
+//!   `vk::MemoryBarrier` or as `vk::BufferMemoryBarrier`s on your ray and hit
+//!   ranges. Host writes to mapped memory are made visible by the submission itself.
 //! - **After**: before anything reads the hits (or counters), a barrier from
 //!   `COMPUTE_SHADER`/`SHADER_WRITE` to the reader's stage and access
 //!   (`COMPUTE_SHADER`/`SHADER_READ`, `TRANSFER`/`TRANSFER_READ`, `HOST`/`HOST_READ`).
@@ -375,8 +386,13 @@ pub struct Tracer {
     scene: TracerScene,
     /// Incremented by `replace_scene`; bindings of an older scene are refused.
     generation: u64,
-    /// Bound in place of buffers a dispatch does not use (side buffers, counters).
+    /// Bound in place of buffers a dispatch does not use: `dummy` at the bindings
+    /// the kernel only reads (side buffers, the order), `write_dummy` at those it
+    /// may write (counters, the careful list). Apart, so that no recording reads
+    /// what another wrote as validation counts writes (every writable binding a
+    /// kernel uses): recordings need no barrier between them for these.
     dummy: Buffer,
+    write_dummy: Buffer,
     pipelines: TracePipelines,
     chunk: usize,
 }
@@ -566,11 +582,29 @@ pub struct TraceBinding {
     /// `RayOrder::Coherent`: the ordering kernels, their descriptor set, the bucket
     /// counts and the order.
     order: Option<OrderPass>,
+    /// The caller's hit and counter ranges (`None`: the tracer's `write_dummy` is
+    /// bound there), which both passes of a robust trace write: the barrier
+    /// between the passes names them.
+    hits: BufferRange,
+    counters: Option<BufferRange>,
     kernel: usize,
     pipeline: vk::Pipeline,
     generation: u64,
     capacity: u32,
     options: TraceOptions,
+}
+
+/// The memory dependency of one of kdtrace's barriers on `range` alone: its
+/// `src` accesses before, `dst` accesses after (no queue family transfer).
+fn buffer_barrier(range: BufferRange, src: vk::AccessFlags, dst: vk::AccessFlags) -> vk::BufferMemoryBarrier<'static> {
+    vk::BufferMemoryBarrier::default()
+        .src_access_mask(src)
+        .dst_access_mask(dst)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .buffer(range.buffer)
+        .offset(range.offset)
+        .size(range.range)
 }
 
 /// The ordering dispatches of a binding (`RayOrder::Coherent`).
@@ -579,7 +613,7 @@ struct OrderPass {
     set: BufferSet,
     buckets: Buffer,
     /// The order, bound in both sets.
-    _list: Buffer,
+    list: Buffer,
 }
 
 impl TraceBinding {
@@ -642,15 +676,23 @@ impl Tracer {
     }
 
     fn from_scene(ctx: &Arc<GpuContext>, scene: TracerScene) -> Result<Tracer> {
-        let dummy =
-            Buffer::new(ctx, 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly, "unused binding")?;
+        let unused = |name| Buffer::new(ctx, 16, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::GpuOnly, name);
+        let (dummy, write_dummy) = (unused("unused binding")?, unused("unused written binding")?);
         // Rays (32 B), hits (16 B) and counters per chunk must fit the storage range,
         // and the dispatch must fit the workgroup count limit.
         let limit = ctx.info.max_storage_buffer_range;
         let by_range = (limit / COUNTER_BYTES.max(RAY_BYTES)) as usize;
         let by_groups = ctx.info.max_workgroup_count_x as usize * TRACE_WORKGROUP_SIZE as usize;
         let chunk = DEFAULT_CHUNK.min(by_range).min(by_groups).max(TRACE_WORKGROUP_SIZE as usize);
-        Ok(Tracer { ctx: ctx.clone(), scene, generation: 0, dummy, pipelines: TracePipelines::new(ctx), chunk })
+        Ok(Tracer {
+            ctx: ctx.clone(),
+            scene,
+            generation: 0,
+            dummy,
+            write_dummy,
+            pipelines: TracePipelines::new(ctx),
+            chunk,
+        })
     }
 
     /// Replaces the scene with `tree` over `triangles` (same checks and upload as
@@ -874,6 +916,8 @@ impl Tracer {
                     set,
                     careful: None,
                     order: None,
+                    hits,
+                    counters,
                     kernel,
                     pipeline: k.main.pipeline,
                     generation: self.generation,
@@ -888,9 +932,8 @@ impl Tracer {
         ranges[BINDING_TRIANGLES as usize] = BufferRange::whole(&scene.triangles);
         ranges[BINDING_RAYS as usize] = rays;
         ranges[BINDING_HITS as usize] = hits;
-        if let Some(c) = counters {
-            ranges[BINDING_COUNTERS as usize] = c;
-        }
+        ranges[BINDING_COUNTERS as usize] = counters.unwrap_or(BufferRange::whole(&self.write_dummy));
+        ranges[BINDING_CAREFUL as usize] = BufferRange::whole(&self.write_dummy);
         if let (true, Some([parents, boxes, ropes])) = (uses_links, &scene.links) {
             ranges[BINDING_PARENTS as usize] = BufferRange::whole(parents);
             ranges[BINDING_NODE_BOXES as usize] = BufferRange::whole(boxes);
@@ -932,7 +975,7 @@ impl Tracer {
                 // SAFETY: the bucket and order buffers are this tracer's; the caller
                 // vouches for `rays`. The three steps share one binding layout.
                 let set = unsafe { BufferSet::from_ranges(&self.ctx, &kernels[0], &order_ranges)? };
-                Some(OrderPass { kernels, set, buckets, _list: list })
+                Some(OrderPass { kernels, set, buckets, list })
             }
         };
         // SAFETY: the scene, dummy and list buffers are this tracer's; the caller
@@ -942,6 +985,8 @@ impl Tracer {
             set,
             careful,
             order,
+            hits,
+            counters,
             kernel,
             pipeline: k.main.pipeline,
             generation: self.generation,
@@ -995,91 +1040,76 @@ impl Tracer {
         };
         let push = bytemuck::bytes_of(&params);
         let device = &self.ctx.device;
-        let barrier = |src_stage, src_access, dst_stage, dst_access| {
-            let barrier = vk::MemoryBarrier::default().src_access_mask(src_access).dst_access_mask(dst_access);
-            // SAFETY: `cmd` is recording (the caller's contract).
+        // Every barrier names the buffers it orders (buffer memory barriers, never
+        // a global memory barrier): the binding's own, and between the two passes
+        // of a robust trace the hit and counter ranges the fast pass has just
+        // written. The caller's writes before the recording (of its rays, or of its
+        // hits before the fast pass) are thus never made visible by kdtrace: a
+        // missing barrier of the caller's is reported by synchronization
+        // validation in every mode (tests/embed.rs checks robust, plain, ordered).
+        let barrier = |src_stage, dst_stage, buffers: &[vk::BufferMemoryBarrier]| {
+            // SAFETY: `cmd` is recording (the caller's contract); the buffers are
+            // live (the binding's own, or its ranges, which the caller vouched for).
             unsafe {
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    src_stage,
-                    dst_stage,
-                    vk::DependencyFlags::empty(),
-                    &[barrier],
-                    &[],
-                    &[],
-                )
+                device.cmd_pipeline_barrier(cmd, src_stage, dst_stage, vk::DependencyFlags::empty(), &[], buffers, &[])
             };
         };
-        // SAFETY: forwarded from the caller; the list buffer lives in the binding.
+        let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
+        let (write, read_write) =
+            (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+        // SAFETY: forwarded from the caller; the list buffers live in the binding.
         unsafe {
             if let Some(order) = &binding.order {
                 // The coherent order: count the buckets, scan them, place the rays.
-                // The fill waits for an earlier recording's passes over the buffers.
-                barrier(
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::AccessFlags::SHADER_WRITE,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                );
+                // The fill waits for an earlier recording's steps over the buckets.
+                let (buckets, list) = (BufferRange::whole(&order.buckets), BufferRange::whole(&order.list));
+                barrier(compute, transfer, &[buffer_barrier(buckets, write, vk::AccessFlags::TRANSFER_WRITE)]);
                 device.cmd_fill_buffer(cmd, order.buckets.buffer, 0, vk::WHOLE_SIZE, 0);
-                barrier(
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-                );
+                barrier(transfer, compute, &[buffer_barrier(buckets, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
                 let [count_step, scan_step, scatter_step] = &*order.kernels;
                 let step = |k: &Kernel, threads: u32| {
                     k.record_dispatch(cmd, order.set.set, push, threads);
                     barrier(
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::AccessFlags::SHADER_WRITE,
-                        vk::PipelineStageFlags::COMPUTE_SHADER,
-                        vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                        compute,
+                        compute,
+                        &[buffer_barrier(buckets, write, read_write), buffer_barrier(list, write, read_write)],
                     );
                 };
                 step(count_step, count);
                 step(scan_step, ORDER_WORKGROUP_SIZE);
                 step(scatter_step, count);
             }
-            let (Some(careful), Some(list)) = (&kernels.careful, &binding.careful) else {
+            let (Some(careful), Some(list_buffer)) = (&kernels.careful, &binding.careful) else {
                 kernels.main.record_dispatch(cmd, binding.set.set, push, count);
                 return;
             };
+            let list = BufferRange::whole(list_buffer);
             // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
             // recording's passes are done with it: a memory dependency, since the
             // kernel's binding of the list is writable (synchronization validation
             // counts the careful pass's use as a write).
-            let stage = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT;
-            barrier(
-                stage,
-                vk::AccessFlags::SHADER_WRITE,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            );
+            let stage = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
+            barrier(stage, transfer, &[buffer_barrier(list, write, vk::AccessFlags::TRANSFER_WRITE)]);
             let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
             device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
-            barrier(
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-            );
+            barrier(transfer, compute, &[buffer_barrier(list, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
             kernels.main.record_dispatch(cmd, binding.set.set, push, count);
-            barrier(
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-                stage,
-                vk::AccessFlags::INDIRECT_COMMAND_READ | vk::AccessFlags::SHADER_READ,
-            );
+            // The careful pass reads the list (as indirect arguments too) and
+            // rewrites the hits (and counters) of the rays it lists, which the fast
+            // pass has written: kdtrace's own writes of the caller's ranges (any
+            // access of the caller's before the fast pass was checked there).
+            let list_args = buffer_barrier(list, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write);
+            let hits = buffer_barrier(binding.hits, write, write);
+            let counters = binding.counters.unwrap_or(BufferRange::whole(&self.write_dummy));
+            barrier(compute, stage, &[list_args, hits, buffer_barrier(counters, write, write)]);
             careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0);
         }
     }
 
     /// Records the trace of the first `count` rays of `binding`'s ray range into
-    /// `cmd` (nothing for `count == 0`). Never submits or waits; see the [module
-    /// docs](self) for the barriers expected before and after and the state it
-    /// changes in `cmd`.
+    /// `cmd` (nothing for `count == 0`). Never submits or waits. The caller's
+    /// barriers before and after are those of [`Tracer::record_trace`]; see the
+    /// [module docs](self) for them and the state it changes in `cmd`.
     ///
     /// Errors (nothing is recorded then): `Error::InvalidInput` when `binding` was
     /// made by another tracer or before [`Tracer::replace_scene`], or `count`
@@ -1105,8 +1135,21 @@ impl Tracer {
     /// [`Tracer::record_binding`]. Counters are off in this mode
     /// (`options.counters` must be false; `bind` takes a counter range). Never
     /// submits or waits: a `backtrack` or `ropes` traversal needs
-    /// [`Tracer::prepare`] first. See the [module docs](self) for the barriers
-    /// expected before and after.
+    /// [`Tracer::prepare`] first.
+    ///
+    /// Barriers are yours around it (details in the [module docs](self)):
+    /// - **before**, one from the stage and access that wrote the rays (and last
+    ///   used the hit range) to `COMPUTE_SHADER` with `SHADER_READ | SHADER_WRITE`,
+    ///   e.g. `COMPUTE_SHADER`/`SHADER_WRITE` after a raygen shader or
+    ///   `TRANSFER`/`TRANSFER_WRITE` after a copy;
+    /// - **after**, one from `COMPUTE_SHADER`/`SHADER_WRITE` to whatever reads the
+    ///   hits, and an execution dependency after `COMPUTE_SHADER` before the rays
+    ///   are written again.
+    ///
+    /// kdtrace's own barriers are buffer memory barriers on its own buffers (and,
+    /// between its two passes, on the hits it has just written): they never stand
+    /// in for yours, so leaving one out is reported by synchronization validation
+    /// whatever `options` say.
     ///
     /// Returns the binding holding the descriptor set: keep it until `cmd` completes.
     ///

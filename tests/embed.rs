@@ -14,17 +14,28 @@ use std::path::PathBuf;
 use ash::vk;
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use embed::Engine;
+use engine_abi::{CameraParams, ENGINE_RAYGEN_BINDINGS, ENGINE_RAYGEN_BINDING_RAYS, ENGINE_WORKGROUP};
 use gpu_allocator::MemoryLocation;
 use kdtrace::consts::{
-    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
+    BINDING_RAYS, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS,
+    COUNTER_TRIANGLES, ORDER_BINDING_RAYS,
 };
-use kdtrace::gpu::{Buffer, BufferRange, GpuContext, Validation};
+use kdtrace::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Validation};
 use kdtrace::kdtree::traverse::{Counters, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::{camera_rays, shade_headlight, to_image};
 use kdtrace::scene::{Camera, Scene};
-use kdtrace::trace::{TraceOptions, Tracer};
+use kdtrace::trace::{RayOrder, TraceOptions, Tracer};
+use kdtrace::traversal::Traversal;
 use kdtrace::{Error, Hit, Ray};
+
+/// The example engine's constants and structs (its raygen shader's binding and
+/// push constants), from their one source.
+#[allow(dead_code)]
+mod engine_abi {
+    include!("../src/gpu_struct.rs");
+    include!("../glsl/examples/abi.rs");
+}
 
 /// The layer as `common::context` chooses it: required under CI, else if installed.
 fn validation() -> Validation {
@@ -449,5 +460,192 @@ fn one_command_buffer_with_several_recordings_is_hazard_free() {
     );
     drop((binding, other, other_hits));
     drop((tracer, ranges));
+    assert_validation_clean(&ctx);
+}
+
+/// How the caller's "raygen" writes the rays before the trace.
+#[derive(Clone, Copy, Debug)]
+enum Raygen {
+    /// The example engine's raygen shader (`glsl/examples/raygen.comp`): `SHADER_WRITE`.
+    Compute,
+    /// A copy from a staging buffer (an upload): `TRANSFER_WRITE`.
+    Copy,
+}
+
+/// The push constants of the example's raygen shader for `camera` (the example's
+/// pinhole basis, in f32).
+fn raygen_params(camera: &Camera, width: u32, height: u32) -> CameraParams {
+    let forward = (camera.target - camera.eye).normalize();
+    let right = forward.cross(camera.up).normalize();
+    let up = right.cross(forward);
+    let tan = (0.5 * camera.fov_deg.to_radians()).tan();
+    let v4 = |v: glam::Vec3| [v.x, v.y, v.z, 0.0];
+    CameraParams {
+        eye: v4(camera.eye),
+        forward: v4(forward),
+        right: v4(right * tan * width as f32 / height as f32),
+        up: v4(up * tan),
+        width,
+        height,
+        pad0: 0,
+        pad1: 0,
+    }
+}
+
+/// The caller's writes of the rays are the caller's to synchronize, and kdtrace's
+/// own barriers name only kdtrace's own buffers: an engine that records its
+/// raygen and then `record_trace` without the barrier the recording contract
+/// asks for is reported by synchronization validation in every mode — the
+/// robust default (whose careful-list reset once was a global barrier that hid
+/// the bug), plain traversal, the rays ordered on the device, a traversal with
+/// side buffers — whether a compute shader or a copy wrote the rays. With the
+/// contract's barriers as buffer barriers naming only the caller's ranges (the
+/// rays before the trace; the hits before a second recording of the binding)
+/// each is clean: kdtrace orders the reuse of its own buffers itself.
+#[test]
+fn a_missing_barrier_after_the_callers_raygen_is_reported() {
+    let ctx = context();
+    if !ctx.validation_enabled() {
+        eprintln!("skipping: the validation layer is not installed");
+        return;
+    }
+    let (scene, tree) = load("cornell_box.obj");
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let (width, height) = (16, 12);
+    let count = width * height;
+    let rays = camera_rays(&camera, width, height);
+
+    // The engine's buffers: rays (device-local), a staging copy of them, hits.
+    let ray_bytes = (count as usize * std::mem::size_of::<Ray>()) as u64;
+    let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let ray_buf = Buffer::new(
+        &ctx,
+        ray_bytes,
+        usage | vk::BufferUsageFlags::TRANSFER_DST,
+        MemoryLocation::GpuOnly,
+        "engine rays",
+    )
+    .unwrap();
+    let mut staging =
+        Buffer::new(&ctx, ray_bytes, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu, "engine staging")
+            .unwrap();
+    staging.write(0, bytemuck::cast_slice(&rays)).unwrap();
+    let hit_bytes = (count as usize * std::mem::size_of::<Hit>()) as u64;
+    let hit_buf = Buffer::new(&ctx, hit_bytes, usage, MemoryLocation::GpuToCpu, "engine hits").unwrap();
+    let (ray_range, hit_range) = (BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf));
+
+    // The engine's raygen: the example's shader, as a kdtrace kernel for brevity.
+    let raygen = Kernel::new(
+        &ctx,
+        &KernelDesc {
+            name: "engine raygen",
+            spirv: shaders::EXAMPLE_RAYGEN,
+            bindings: ENGINE_RAYGEN_BINDINGS,
+            push_constant_size: std::mem::size_of::<CameraParams>() as u32,
+            workgroup_size: ENGINE_WORKGROUP,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut raygen_ranges = [ray_range; ENGINE_RAYGEN_BINDINGS as usize];
+    raygen_ranges[ENGINE_RAYGEN_BINDING_RAYS as usize] = ray_range;
+    // SAFETY: the ray buffer is a live storage buffer that outlives the set.
+    let raygen_set = unsafe { BufferSet::from_ranges(&ctx, &raygen, &raygen_ranges) }.unwrap();
+    let params = raygen_params(&camera, width, height);
+
+    // A barrier of the caller's naming only `buffer`, from `src` to compute-shader `dst_access`.
+    // SAFETY (at each call): `cmd` is recording outside a render pass; `buffer` is live.
+    let caller_barrier = |cmd, buffer, src: (vk::PipelineStageFlags, vk::AccessFlags), dst_access| unsafe {
+        let barrier = vk::BufferMemoryBarrier::default()
+            .src_access_mask(src.1)
+            .dst_access_mask(dst_access)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(buffer)
+            .offset(0)
+            .size(vk::WHOLE_SIZE);
+        let (dst_stage, flags) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::DependencyFlags::empty());
+        ctx.device.cmd_pipeline_barrier(cmd, src.0, dst_stage, flags, &[], &[barrier], &[]);
+    };
+
+    // The default (robust: two passes), plain traversal (one), the rays ordered on
+    // the device first, and a traversal with side buffers (robust and plain).
+    let plain = |options: TraceOptions| TraceOptions::new(Traversal { robust: false, ..options.traversal });
+    let (robust, backtrack) = (TraceOptions::default(), TraceOptions::variant(Variant::Backtrack));
+    let ordered = TraceOptions { order: RayOrder::Coherent, ..robust };
+    let modes = [
+        ("robust", robust),
+        ("plain", plain(robust)),
+        ("ordered", ordered),
+        ("robust backtrack", backtrack),
+        ("plain backtrack", plain(backtrack)),
+    ];
+    for (mode, options) in modes {
+        tracer.prepare(&options).unwrap();
+        let expected = tracer.trace(&rays, &options).unwrap().hits;
+        assert!(ctx.take_validation_messages().is_empty());
+        for kind in [Raygen::Compute, Raygen::Copy] {
+            for with_barrier in [true, false] {
+                let binding = submit(&ctx, |cmd| {
+                    // SAFETY: `cmd` is recording outside a render pass; the buffers,
+                    // the set and the binding outlive the waited submission.
+                    unsafe {
+                        let written = match kind {
+                            Raygen::Compute => {
+                                raygen.record_dispatch(cmd, raygen_set.set, bytemuck::bytes_of(&params), count);
+                                (vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_WRITE)
+                            }
+                            Raygen::Copy => {
+                                let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: ray_bytes }];
+                                ctx.device.cmd_copy_buffer(cmd, staging.buffer, ray_buf.buffer, &region);
+                                (vk::PipelineStageFlags::TRANSFER, vk::AccessFlags::TRANSFER_WRITE)
+                            }
+                        };
+                        let read_write = vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE;
+                        if with_barrier {
+                            caller_barrier(cmd, ray_buf.buffer, written, read_write);
+                        }
+                        let binding = tracer.record_trace(cmd, ray_range, hit_range, count, &options).unwrap();
+                        if with_barrier {
+                            // A second recording after the contract's barrier on the hits
+                            // alone: kdtrace orders the reuse of its own buffers itself.
+                            let traced = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_WRITE);
+                            caller_barrier(cmd, hit_buf.buffer, traced, read_write);
+                            tracer.record_binding(cmd, &binding, count).unwrap();
+                        }
+                        binding
+                    }
+                });
+                drop(binding);
+                let messages = ctx.take_validation_messages();
+                let case = format!("{mode}, {kind:?} raygen, {} barrier", ["without", "with"][with_barrier as usize]);
+                if with_barrier {
+                    assert!(
+                        messages.is_empty(),
+                        "{case}: hazards with the contract's barrier:\n{}",
+                        messages.join("\n")
+                    );
+                    if let Raygen::Copy = kind {
+                        let hits = bytemuck::cast_slice(hit_buf.read(0, hit_bytes as usize).unwrap()).to_vec();
+                        assert!(same_bits(&hits, &expected), "{case}: the hits of Tracer::trace");
+                    }
+                    continue;
+                }
+                // Reported at the ray binding of the first kernel that reads the rays.
+                let ray_binding = match options.order {
+                    RayOrder::AsGiven => BINDING_RAYS,
+                    RayOrder::Coherent => ORDER_BINDING_RAYS,
+                };
+                let on_rays = format!("binding #{ray_binding} ");
+                let hazard =
+                    messages.iter().find(|m| m.contains("SYNC-HAZARD-READ-AFTER-WRITE") && m.contains(&on_rays));
+                let hazard = hazard.unwrap_or_else(|| panic!("{case}: not reported on the rays ({messages:?})"));
+                let prior = hazard.split("prior_usage: ").nth(1).and_then(|p| p.split(',').next()).unwrap_or("?");
+                eprintln!("{case}: SYNC-HAZARD-READ-AFTER-WRITE at {on_rays}(prior usage {prior})");
+            }
+        }
+    }
+    drop((raygen_set, raygen, tracer, ray_buf, staging, hit_buf));
     assert_validation_clean(&ctx);
 }
