@@ -21,6 +21,10 @@
 //! `$OUT_DIR/examples/engine.glsl`, as a user's build would pass its own) into
 //! `shaders::EXAMPLE_*`.
 
+// Links the static glslang and SPIRV-Tools that Debian's libshaderc-dev leaves
+// out of libshaderc_combined.a (crates/shaderc-link); named, as nothing of it is used.
+extern crate kdtrace_shaderc_link as _;
+
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs;
 use std::path::{Path, PathBuf};
