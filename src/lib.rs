@@ -17,7 +17,8 @@
 //! # Quick start: headless
 //!
 //! kdtrace creates its own instance and device ([`gpu::GpuContext::headless`]),
-//! uploads the rays, submits, waits and reads the hits back:
+//! uploads the rays, submits, waits and reads the hits back (`Scene::load` needs
+//! the feature `obj`, a default one; [`scene::Scene::from_triangles`] does not):
 //!
 //! ```no_run
 //! use glam::Vec3;
@@ -118,7 +119,8 @@
 //!
 //! [`gpu::shaders::HEADER`] holds those declarations as a self-contained
 //! `kdtrace.glsl`, with the special `prim_id`s and counter indices as `#define`s. Write it into your shader include path and
-//! `#include "kdtrace.glsl"`, then declare e.g.
+//! `#include "kdtrace.glsl"` (the build script of a crate that depends on kdtrace
+//! finds it as a file in the folder `DEP_KDTRACE_INCLUDE`), then declare e.g.
 //! `layout(std430, binding = 0) buffer Hits { Hit hits[]; };`.
 //!
 //! # Threads
@@ -140,6 +142,7 @@ pub mod bench;
 /// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).
 pub mod consts;
 pub mod error;
+#[cfg(any(feature = "exact", test))]
 pub mod exact;
 pub mod geom;
 pub mod gpu;
@@ -149,6 +152,7 @@ pub mod ray_query;
 pub mod raygen;
 pub mod render;
 pub mod scene;
+#[cfg(feature = "exact")]
 pub mod stress;
 #[cfg(feature = "cli")]
 pub mod sweep;
@@ -157,3 +161,12 @@ pub mod traversal;
 
 pub use error::{Error, Result};
 pub use geom::{Aabb, Hit, Ray};
+
+/// The Vulkan bindings of kdtrace's public types ([`gpu::AdoptDesc`], [`gpu::BufferRange`], …):
+/// use this `ash` so that an engine's handles are the same types.
+pub use ash;
+/// The vector types of triangles, rays and cameras (`glam::Vec3`).
+pub use glam;
+/// The allocator that [`gpu::AdoptDesc`] shares with the engine
+/// (`Arc<Mutex<gpu_allocator::vulkan::Allocator>>`).
+pub use gpu_allocator;

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use glam::{DVec3, Vec3};
 
-use super::obj::{as_text, line_of, scene_error};
+use super::text::{as_text, line_of, scene_error};
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
 

@@ -1,14 +1,20 @@
-//! Scenes: triangles, materials and cameras, loaded from OBJ + MTL files.
+//! Scenes: triangles, materials and cameras, loaded from OBJ + MTL files
+//! (feature `obj`) or made from triangles.
 //!
 //! Triangles are numbered in the order their faces appear in the OBJ file, each
 //! n-gon fanned as `(a0,a1,a2), (a0,a2,a3), …`: that number is the `prim_id`
 //! of hits. Zero-area triangles are kept so that the numbering holds.
 
 mod camera;
+#[cfg(any(feature = "obj", test))]
 mod obj;
+mod text;
 
+#[cfg(any(feature = "obj", test))]
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+#[cfg(any(feature = "obj", test))]
+use std::path::Path;
+use std::path::PathBuf;
 
 use glam::Vec3;
 
@@ -49,6 +55,7 @@ impl Material {
     }
 
     /// Converts a tobj material; what the MTL leaves out comes from `Material::default()`.
+    #[cfg(any(feature = "obj", test))]
     fn from_tobj(m: tobj::Material) -> Material {
         let d = Material::default();
         // tobj 4.0.5 parses `Ke` itself; older versions left it in `unknown_param`.
@@ -97,11 +104,12 @@ impl Scene {
     /// a vertex a face uses), a malformed MTL file, and a scene without triangles.
     /// An MTL file that cannot be read, or a `usemtl` of an unknown material, is
     /// a warning on stderr; those faces get the default material.
+    #[cfg(any(feature = "obj", test))]
     pub fn load(path: &Path) -> Result<Scene> {
         let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let obj = obj::parse_obj(path, &bytes)?;
         if obj.triangles.is_empty() {
-            return Err(obj::scene_error(path, None, "scene has no triangles"));
+            return Err(text::scene_error(path, None, "scene has no triangles"));
         }
 
         let mut materials = Vec::new();
@@ -151,10 +159,11 @@ impl Scene {
     /// A scene from OBJ text in memory, geometry only: `mtllib` is not followed
     /// and every face gets the default material. `name` names the source in
     /// errors. The same checks and errors as [`Scene::load`].
+    #[cfg(any(feature = "obj", test))]
     pub fn from_obj_bytes(name: &Path, bytes: &[u8]) -> Result<Scene> {
         let obj = obj::parse_obj(name, bytes)?;
         if obj.triangles.is_empty() {
-            return Err(obj::scene_error(name, None, "scene has no triangles"));
+            return Err(text::scene_error(name, None, "scene has no triangles"));
         }
         let ids = vec![0; obj.triangles.len()];
         Ok(Scene::assemble(Some(name.to_path_buf()), obj.triangles, ids, vec![Material::default()]))

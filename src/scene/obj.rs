@@ -16,8 +16,9 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use super::text::{as_text, scene_error};
 use super::Material;
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// `ObjFile::usemtl` of a triangle that comes before any `usemtl`.
 pub(crate) const NO_USEMTL: u32 = u32::MAX;
@@ -33,27 +34,6 @@ pub(crate) struct ObjFile {
     pub usemtl_names: Vec<String>,
     /// The `mtllib` arguments with their (1-based) lines.
     pub mtllibs: Vec<(String, usize)>,
-}
-
-/// An `Error::Scene` for `path` at 1-based `line`.
-pub(crate) fn scene_error(path: &Path, line: Option<usize>, message: impl Into<String>) -> Error {
-    Error::Scene { path: path.to_path_buf(), line, message: message.into() }
-}
-
-/// The 1-based line of byte offset `pos` in `bytes`.
-pub(crate) fn line_of(bytes: &[u8], pos: usize) -> usize {
-    bytes[..pos.min(bytes.len())].iter().filter(|&&b| b == b'\n').count() + 1
-}
-
-/// `bytes` as UTF-8 text without a leading byte-order mark, or an error naming
-/// the line of the first invalid byte.
-pub(crate) fn as_text<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str> {
-    match std::str::from_utf8(bytes) {
-        Ok(text) => Ok(text.strip_prefix('\u{feff}').unwrap_or(text)),
-        Err(e) => {
-            Err(scene_error(path, Some(line_of(bytes, e.valid_up_to())), "not UTF-8 text (is this a binary file?)"))
-        }
-    }
 }
 
 /// The rest of a statement after its keyword, trimmed (names may contain spaces).
@@ -276,6 +256,7 @@ fn check_mtl(path: &Path, text: &str) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
 
     fn parse(text: &str) -> Result<ObjFile> {
         parse_obj(Path::new("t.obj"), text.as_bytes())
