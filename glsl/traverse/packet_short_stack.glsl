@@ -28,7 +28,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                               inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[STACK_SIZE];
-    uvec2 stack_seg[STACK_SIZE];
+    double stack_seg[STACK_SIZE];
     uint head = 0u;   // next slot to write
     uint count = 0u;
     uint node = 0u;

@@ -26,7 +26,7 @@ bool lane_wants(bool alive, float t0, float t1, Closest best) {
 bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[MAX_STACK];
-    uvec2 stack_seg[MAX_STACK];
+    double stack_seg[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     bool lane_on = alive;

@@ -17,7 +17,7 @@
 bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down, inout Closest best,
                        inout TraceCounters c) {
     uint stack_node[STACK_SIZE];
-    uvec2 stack_seg[STACK_SIZE];
+    double stack_seg[STACK_SIZE];
     uvec2 stack_plane[STACK_SIZE];  // the plane each entry's segment ends at
     uint head = 0u;   // next slot to write
     uint count = 0u;

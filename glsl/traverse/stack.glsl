@@ -20,7 +20,7 @@
 // scatter whether or not any lane pushes.
 bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uint stack_node[MAX_STACK];
-    uvec2 stack_seg[MAX_STACK];
+    double stack_seg[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     uint step = 0u;
