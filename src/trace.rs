@@ -582,11 +582,11 @@ pub struct TraceBinding {
     /// `RayOrder::Coherent`: the ordering kernels, their descriptor set, the bucket
     /// counts and the order.
     order: Option<OrderPass>,
-    /// The caller's hit and counter ranges (`None`: the tracer's `write_dummy` is
-    /// bound there), which both passes of a robust trace write: the barrier
-    /// between the passes names them.
+    /// The hit and counter ranges bound (the counters: the caller's, or the
+    /// tracer's `write_dummy`), which both passes of a robust trace write: the
+    /// barrier between the passes names them.
     hits: BufferRange,
-    counters: Option<BufferRange>,
+    counters: BufferRange,
     kernel: usize,
     pipeline: vk::Pipeline,
     generation: u64,
@@ -917,7 +917,7 @@ impl Tracer {
                     careful: None,
                     order: None,
                     hits,
-                    counters,
+                    counters: counters.unwrap_or(BufferRange::whole(&self.write_dummy)),
                     kernel,
                     pipeline: k.main.pipeline,
                     generation: self.generation,
@@ -932,7 +932,8 @@ impl Tracer {
         ranges[BINDING_TRIANGLES as usize] = BufferRange::whole(&scene.triangles);
         ranges[BINDING_RAYS as usize] = rays;
         ranges[BINDING_HITS as usize] = hits;
-        ranges[BINDING_COUNTERS as usize] = counters.unwrap_or(BufferRange::whole(&self.write_dummy));
+        let counters = counters.unwrap_or(BufferRange::whole(&self.write_dummy));
+        ranges[BINDING_COUNTERS as usize] = counters;
         ranges[BINDING_CAREFUL as usize] = BufferRange::whole(&self.write_dummy);
         if let (true, Some([parents, boxes, ropes])) = (uses_links, &scene.links) {
             ranges[BINDING_PARENTS as usize] = BufferRange::whole(parents);
@@ -1100,8 +1101,7 @@ impl Tracer {
             // access of the caller's before the fast pass was checked there).
             let list_args = buffer_barrier(list, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write);
             let hits = buffer_barrier(binding.hits, write, write);
-            let counters = binding.counters.unwrap_or(BufferRange::whole(&self.write_dummy));
-            barrier(compute, stage, &[list_args, hits, buffer_barrier(counters, write, write)]);
+            barrier(compute, stage, &[list_args, hits, buffer_barrier(binding.counters, write, write)]);
             careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0);
         }
     }
