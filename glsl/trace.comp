@@ -79,11 +79,17 @@ const float FLT_MAX = 3.40282347e38;
 // Robust rays from far away (more than SHIFT_DIAGONALS scene diagonals before
 // the box) move the segment frame's origin to a point p of the ray next to the
 // box, so that decisions carry errors in scene space rather than relative to a
-// huge t. p is the ray's point at t_shift, the f32 parameter where it crosses a
-// plane c just before the box's near face on its dominant axis k (p lies within
-// about sqrt(3) diagonals before the box entry): o + t_shift d summed exactly
-// and rounded once to float-float, within about 2^-47 |p| of the ray at any
-// distance (inputs scaled by powers of two so that no product overflows). The frame's t_shift is that point's parameter
+// huge t. p is where the ray crosses a plane c just before the box's near face on
+// its dominant axis k (p[k] = c exactly; p lies within about sqrt(3) diagonals
+// before the box entry), and for the other axes
+//   p[j] = (o[j] d[k] - o[k] d[j] + c d[j]) / d[k],
+// whose numerator is summed exactly (three exact products as a Shewchuk
+// expansion: the huge terms of a far origin cancel without loss), then rounded
+// to float-float and divided in float-float: p lies within about 2^-44 |p| of
+// the exact ray, at any distance (inputs scaled by powers of two so that no
+// product overflows). Where the ray moves less along j than |p[j]| (nearly
+// parallel to a plane of axis j), p[j] = o[j] + T d[j] is closer: within about
+// 2^-44 |T d[j]|. The frame's t_shift is that point's parameter
 // (c - o[k]) / d[k], rounded to f32.
 // The f32 triangle test and the plane distances then work from hi + lo (see
 // WatertightRay in triangle.glsl and plane_t in segment.glsl), with a per axis
@@ -117,26 +123,37 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     precise vec3 ds = vec3(ldexp2(d.x, -eq), ldexp2(d.y, -eq), ldexp2(d.z, -eq));
     precise vec3 os = vec3(ldexp2(o.x, -eo), ldexp2(o.y, -eo), ldexp2(o.z, -eo));
     float cs = ldexp2(c, -eo);
-    // The frame's origin is the ray's point at t_shift, the f32 nearest to
-    // (c - o[k]) / d[k]: p = o + t_shift d, summed exactly per axis (an exact
-    // expansion: the far origin's huge terms cancel without loss) and rounded once
-    // to float-float, so p lies on the ray within about 2^-47 |p| per axis, at
-    // exactly the parameter t_shift (which the f32 tests subtract from tmin and
-    // tmax). Scaled: o by 2^-eo and d by 2^-eq, so t_shift by 2^(eq - eo).
+    // The point's parameter T = (c - o[k]) / d[k] (scaled by 2^(eq - eo)).
     vec2 t_scaled = ff_div(ff_diff(cs, os[k]), vec2(ds[k], 0.0));
-    float t_shift = ldexp2(t_scaled.x, eo - eq);
-    float ts = ldexp2(t_shift, eq - eo);
     vec3 hi, lo, a;
     [[unroll]] for (uint j = 0u; j < 3u; ++j) {
-        vec2 step = ff_two_prod(ts, ds[j]);
-        vec2 p = ff_ldexp(ff_exact_sum8(float[8](os[j], step.x, step.y, 0.0, 0.0, 0.0, 0.0, 0.0)), eo);
-        hi[j] = p.x;
-        lo[j] = p.y;
-        // 2^-45 |p| (the rounding to float-float, with margin) and the error terms
-        // a flushing device drops.
-        precise float aj = abs(p.x) * (1.0 / 35184372088832.0) + ldexp2(1.0, eo - 120);  // 2^-45
+        if (j == k) {
+            hi[j] = c;
+            lo[j] = 0.0;
+            a[j] = abs(c) * (1.0 / 35184372088832.0);  // 2^-45
+            continue;
+        }
+        vec2 pa = ff_two_prod(os[j], ds[k]);
+        vec2 pb = ff_two_prod(os[k], ds[j]);
+        vec2 pc = ff_two_prod(cs, ds[j]);
+        vec2 num = ff_exact_sum8(float[8](pa.x, pa.y, -pb.x, -pb.y, pc.x, pc.y, 0.0, 0.0));
+        vec2 p = ff_ldexp(ff_div(num, vec2(ds[k], 0.0)), eo);
+        // The same point as o[j] + T d[j]: off by about 2^-44 of the travel |T d[j]|
+        // instead of 2^-44 |p|, the better one for a ray that moves little along j
+        // (nearly parallel to a plane of axis j: the lateral offset stays exact).
+        vec2 travel = ff_mul_f(t_scaled, ds[j]);
+        vec2 q = ff_ldexp(ff_add_f(travel, os[j]), eo);
+        float travel_mag = ldexp2(abs(travel.x), eo);
+        bool by_travel = travel_mag < abs(p.x);
+        vec2 pj = by_travel ? q : p;
+        hi[j] = pj.x;
+        lo[j] = pj.y;
+        // 2^-44 of that magnitude with margin, and the error terms a flushing device drops.
+        precise float aj = (by_travel ? travel_mag : abs(p.x)) * (1.0 / 4398046511104.0)  // 2^-42
+                           + ldexp2(1.0, eo - 120);
         a[j] = aj;
     }
+    float t_shift = ldexp2(t_scaled.x, eo - eq);
     // Flat axes: where a / |d| would exceed T_EPS s_max, s_max a bound on |t| over
     // the segment in the new frame (from p to the clip's t1, plus rounding).
     // There the ray's coordinate stays within band = a + |d| s_max of hi + lo.

@@ -145,8 +145,8 @@ fn is_far(r: &TraceRay, b: &Aabb, t0: f32) -> bool {
 }
 
 /// Twin of `shift_to_scene` in trace.comp: a far ray ([`is_far`]) is traversed
-/// from its point at `t_shift`, just before the box on its dominant axis,
-/// summed exactly and rounded once (see trace.comp), with the
+/// from the point where it crosses the box's near face on its dominant axis,
+/// computed from an exact expansion of its numerator (see trace.comp), with the
 /// bound `t_err` and its flat axes; returns the clip there (None: it misses
 /// after all). `t1`: the clip's end in the ray's own frame.
 fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t1: f32) -> Option<(f32, f32)> {
@@ -165,16 +165,28 @@ fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t1: f32) -> Option<(f32, f32)> {
     let ds = [0, 1, 2].map(|i| ldexp2(d[i], -eq));
     let os = [0, 1, 2].map(|i| ldexp2(o[i], -eo));
     let cs = ldexp2(c, -eo);
-    // The frame's origin: o + t_shift·d summed exactly, rounded once (see trace.comp).
-    let t_shift = ldexp2(Ff::diff(cs, os[k]).div(Ff::from_f32(ds[k])).hi, eo - eq);
-    let ts = ldexp2(t_shift, eq - eo);
+    // The point's parameter T = (c - o[k]) / d[k] (scaled by 2^(eq - eo)).
+    let t_scaled = Ff::diff(cs, os[k]).div(Ff::from_f32(ds[k]));
     let (mut hi, mut lo, mut a) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     for j in 0..3 {
-        let step = two_prod(ts, ds[j]);
-        let p = ff_ldexp(exact_sum8([os[j], step.hi, step.lo, 0.0, 0.0, 0.0, 0.0, 0.0]), eo);
-        (hi[j], lo[j]) = (p.hi, p.lo);
-        a[j] = ftz(ftz(p.hi.abs() * 2f32.powi(-45)) + ldexp2(1.0, eo - 120));
+        if j == k {
+            (hi[j], lo[j], a[j]) = (c, 0.0, ftz(c.abs() * 2f32.powi(-45)));
+            continue;
+        }
+        let (pa, pb, pc) = (two_prod(os[j], ds[k]), two_prod(os[k], ds[j]), two_prod(cs, ds[j]));
+        let num = exact_sum8([pa.hi, pa.lo, -pb.hi, -pb.lo, pc.hi, pc.lo, 0.0, 0.0]);
+        let p = ff_ldexp(num.div(Ff::from_f32(ds[k])), eo);
+        // The same point as o[j] + T d[j], the closer one when the ray moves little along j.
+        let travel = t_scaled.mul_f(ds[j]);
+        let q = ff_ldexp(travel.add_f(os[j]), eo);
+        let travel_mag = ldexp2(travel.hi.abs(), eo);
+        let by_travel = travel_mag < p.hi.abs();
+        let pj = if by_travel { q } else { p };
+        (hi[j], lo[j]) = (pj.hi, pj.lo);
+        let mag = if by_travel { travel_mag } else { p.hi.abs() };
+        a[j] = ftz(ftz(mag * 2f32.powi(-42)) + ldexp2(1.0, eo - 120));
     }
+    let t_shift = ldexp2(t_scaled.hi, eo - eq);
     // Flat axes: see trace.comp.
     let s_max = (t1 - t_shift) + t1.abs() * 2f32.powi(-20);
     let mut e = 0.0f32;
