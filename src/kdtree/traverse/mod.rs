@@ -24,8 +24,7 @@ use glam::Vec3;
 use super::links::TreeLinks;
 use super::KdNode;
 use crate::consts::{MAX_SHORT_STACK, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
-use crate::ff::{exact_sum8, ftz, two_prod, Ff};
-use crate::geom::{exponent_of, ff_ldexp, ldexp2, Aabb, Hit, Ray, WatertightRay};
+use crate::geom::{Aabb, Hit, Ray, WatertightRay};
 use decide::T_EPS;
 use leaf::Closest;
 use segment::{clip_to_box, glsl_max, TraceRay};
@@ -90,7 +89,7 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         let mut clipped = clip_to_box(&r, &scene.bounds);
         if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
             if is_far(&r, &scene.bounds, t0) {
-                clipped = shift_to_scene(&mut r, &scene.bounds, t1);
+                clipped = shift_to_scene(&mut r, &scene.bounds, t0, t1);
                 best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
             }
         }
@@ -112,9 +111,9 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
                 best.prim_id = PRIM_INCOMPLETE;
             }
         }
-        // Back to the ray's own parameter (one rounding: an f32 sum is correctly rounded).
+        // Back to the ray's own parameter (one rounding, in f64).
         if r.wr.t_shift != 0.0 {
-            best.t += r.wr.t_shift;
+            best.t = (best.t as f64 + r.wr.t_shift as f64) as f32;
         }
     }
     if best.prim_id >= PRIM_INCOMPLETE {
@@ -145,67 +144,40 @@ fn is_far(r: &TraceRay, b: &Aabb, t0: f32) -> bool {
 }
 
 /// Twin of `shift_to_scene` in trace.comp: a far ray ([`is_far`]) is traversed
-/// from the point where it crosses the box's near face on its dominant axis,
-/// computed from an exact expansion of its numerator (see trace.comp), with the
-/// bound `t_err` and its flat axes; returns the clip there (None: it misses
-/// after all). `t1`: the clip's end in the ray's own frame.
-fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t1: f32) -> Option<(f32, f32)> {
-    let k = r.wr.kz;
-    let (o, d) = (r.wr.origin, r.dir);
-    // A plane a little before the near face (see trace.comp).
-    let margin = (b.max[k] - b.min[k]) * (1.0 / 128.0)
-        + b.min[k].abs() * 2f32.powi(-20)
-        + b.max[k].abs() * 2f32.powi(-20)
-        + f32::MIN_POSITIVE;
-    let c = if d[k] > 0.0 { b.min[k] - margin } else { b.max[k] + margin };
-    // Scaled inputs: d[k] in [1, 2), the origin and c below 2^100.
-    let eq = exponent_of(d[k].abs());
-    let om = glsl_max(glsl_max(o.x.abs(), o.y.abs()), glsl_max(o.z.abs(), c.abs()));
-    let eo = (exponent_of(om) - 99).max(0);
-    let ds = [0, 1, 2].map(|i| ldexp2(d[i], -eq));
-    let os = [0, 1, 2].map(|i| ldexp2(o[i], -eo));
-    let cs = ldexp2(c, -eo);
-    // The point's parameter T = (c - o[k]) / d[k] (scaled by 2^(eq - eo)).
-    let t_scaled = Ff::diff(cs, os[k]).div(Ff::from_f32(ds[k]));
-    let (mut hi, mut lo, mut a) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
-    for j in 0..3 {
-        if j == k {
-            (hi[j], lo[j], a[j]) = (c, 0.0, ftz(c.abs() * 2f32.powi(-45)));
-            continue;
-        }
-        let (pa, pb, pc) = (two_prod(os[j], ds[k]), two_prod(os[k], ds[j]), two_prod(cs, ds[j]));
-        let num = exact_sum8([pa.hi, pa.lo, -pb.hi, -pb.lo, pc.hi, pc.lo, 0.0, 0.0]);
-        let p = ff_ldexp(num.div(Ff::from_f32(ds[k])), eo);
-        // The same point as o[j] + T d[j], the closer one when the ray moves little along j.
-        let travel = t_scaled.mul_f(ds[j]);
-        let q = ff_ldexp(travel.add_f(os[j]), eo);
-        let travel_mag = ldexp2(travel.hi.abs(), eo);
-        let by_travel = travel_mag < p.hi.abs();
-        let pj = if by_travel { q } else { p };
-        (hi[j], lo[j]) = (pj.hi, pj.lo);
-        let mag = if by_travel { travel_mag } else { p.hi.abs() };
-        a[j] = ftz(ftz(mag * 2f32.powi(-42)) + ldexp2(1.0, eo - 120));
-    }
-    let t_shift = ldexp2(t_scaled.hi, eo - eq);
+/// from its entry `t0` into the box, with the bound `t_err` and its flat axes;
+/// returns the clip there (None: it misses after all). `t0`, `t1`: the clip in
+/// the ray's own frame.
+fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, f32)> {
+    let t_shift = t0 as f64;
+    let mut hi = Vec3::ZERO;
+    let mut lo = Vec3::ZERO;
+    let mut seg_err = Vec3::ZERO;
+    let mut e = 0.0f64;
     // Flat axes: see trace.comp.
-    let s_max = (t1 - t_shift) + t1.abs() * 2f32.powi(-20);
-    let mut e = 0.0f32;
+    let s_max = (t1 as f64 - t0 as f64) + (t1.abs() as f64) * 2f64.powi(-20);
     for axis in 0..3 {
+        let (o, d) = (r.wr.origin[axis] as f64, r.dir[axis] as f64);
+        let p = o + t_shift * d;
+        hi[axis] = p as f32;
+        let rest = p - hi[axis] as f64;
+        lo[axis] = rest as f32;
+        let a = (hi[axis] as f64).abs() * 2f64.powi(-45) + (o.abs() + (t_shift * d).abs()) * 2f64.powi(-50);
+        seg_err[axis] = (rest.abs() + a * 2f64.powi(20)) as f32;
         if r.dir[axis] == 0.0 {
             continue;
         }
-        if a[axis] > T_EPS * s_max * d[axis].abs() {
+        if a > T_EPS as f64 * s_max * d.abs() {
             r.flat_axes |= 1 << axis;
-            r.band[axis] = (a[axis] + d[axis].abs() * s_max) * 1.000001;
+            r.band[axis] = ((a + d.abs() * s_max) * 1.000001) as f32;
         } else {
-            e = glsl_max(e, a[axis] * (1.0 / d[axis].abs()));
+            e = e.max(a / d.abs());
         }
     }
-    r.t_err = glsl_max(e * 1.000001, f32::MIN_POSITIVE);
+    r.t_err = ((e * 1.000001) as f32).max(f32::MIN_POSITIVE);
     r.wr.seg_origin = hi;
     r.wr.seg_lo = lo;
-    r.wr.seg_err = lo.abs() + a * 1_048_576.0;
-    r.wr.t_shift = t_shift;
-    r.wr.seg_tmax = r.tmax - t_shift;
+    r.wr.seg_err = seg_err;
+    r.wr.t_shift = t0;
+    r.wr.seg_tmax = r.tmax - t0;
     clip_to_box(r, b)
 }
