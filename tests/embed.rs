@@ -391,6 +391,28 @@ fn bad_ranges_and_stale_bindings_are_refused() {
     assert_validation_clean(&ctx);
 }
 
+/// The Cornell box on a tracer, with its camera, for the synchronization tests
+/// (`None`, after saying so, when the validation layer is not installed).
+struct SyncCase {
+    ctx: std::sync::Arc<GpuContext>,
+    scene: Scene,
+    tree: KdTree,
+    tracer: Tracer,
+    camera: Camera,
+}
+
+fn sync_case() -> Option<SyncCase> {
+    let ctx = context();
+    if !ctx.validation_enabled() {
+        eprintln!("skipping: the validation layer is not installed");
+        return None;
+    }
+    let (scene, tree) = load("cornell_box.obj");
+    let tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    Some(SyncCase { ctx, scene, tree, tracer, camera })
+}
+
 /// The barriers kdtrace records between its own passes (the fast pass, the
 /// careful list's reset and the indirect careful pass) hold under
 /// synchronization validation (on whenever the validation layer is): one
@@ -401,14 +423,7 @@ fn bad_ranges_and_stale_bindings_are_refused() {
 #[test]
 fn one_command_buffer_with_several_recordings_is_hazard_free() {
     use kdtrace::stress::{stress_rays, Category};
-    let ctx = context();
-    if !ctx.validation_enabled() {
-        eprintln!("skipping: the validation layer is not installed");
-        return;
-    }
-    let (scene, tree) = load("cornell_box.obj");
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
-    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let Some(SyncCase { ctx, scene, tree, mut tracer, camera }) = sync_case() else { return };
     let mut rays = camera_rays(&camera, 24, 16);
     // Hard rays, so that the careful pass has rays to trace (far origins always go
     // through it: the fast pass lists them).
@@ -504,14 +519,7 @@ fn raygen_params(camera: &Camera, width: u32, height: u32) -> CameraParams {
 /// each is clean: kdtrace orders the reuse of its own buffers itself.
 #[test]
 fn a_missing_barrier_after_the_callers_raygen_is_reported() {
-    let ctx = context();
-    if !ctx.validation_enabled() {
-        eprintln!("skipping: the validation layer is not installed");
-        return;
-    }
-    let (scene, tree) = load("cornell_box.obj");
-    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
-    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let Some(SyncCase { ctx, mut tracer, camera, .. }) = sync_case() else { return };
     let (width, height) = (16, 12);
     let count = width * height;
     let rays = camera_rays(&camera, width, height);
