@@ -347,7 +347,8 @@ unsafe extern "system" fn collect_message(
 
 impl Engine {
     /// Creates the engine's instance and device. `float64`: whether to enable
-    /// `shaderFloat64` (kdtrace refuses a device without it; tests check that).
+    /// `shaderFloat64` and `shaderInt64` besides kdtrace's [`required_features`]
+    /// (kdtrace needs neither: tests run both ways).
     pub fn new(validation: Validation, float64: bool) -> Result<Engine> {
         // SAFETY: loading the system Vulkan loader.
         let entry = unsafe { ash::Entry::load() }?;
@@ -413,7 +414,8 @@ impl Engine {
             let (_, pd, family) = best.ok_or_else(|| anyhow!("no Vulkan 1.2 device with a compute queue"))?;
             (pd, family)
         };
-        let enabled_features = if float64 { required_features() } else { vk::PhysicalDeviceFeatures::default() };
+        let enabled_features =
+            if float64 { required_features().shader_float64(true).shader_int64(true) } else { required_features() };
         let priorities = [1.0];
         let queues =
             [vk::DeviceQueueCreateInfo::default().queue_family_index(queue_family).queue_priorities(&priorities)];

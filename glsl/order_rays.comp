@@ -22,8 +22,8 @@ layout(constant_id = ORDER_SPEC_STEP) const uint STEP = ORDER_STEP_COUNT;
 
 layout(local_size_x = ORDER_WORKGROUP_SIZE) in;
 
-// Rays as the trace kernel reads them (32-byte records, as four 64-bit words).
-layout(std430, set = 0, binding = ORDER_BINDING_RAYS) readonly buffer Rays { double ray_words[]; };
+// Rays as the trace kernel reads them (32-byte records, as two uvec4 words).
+layout(std430, set = 0, binding = ORDER_BINDING_RAYS) readonly buffer Rays { uvec4 ray_words[]; };
 // ORDER_BUCKETS counts, then start offsets, then next free places.
 layout(std430, set = 0, binding = ORDER_BINDING_BUCKETS) buffer Buckets { uint buckets[]; };
 // The ray indices in the coherent order.
@@ -39,8 +39,7 @@ uint spread3(uint x) {
 }
 
 uint ray_key(uint index) {
-    Ray ray = ray_from_words(ray_words[4u * index], ray_words[4u * index + 1u], ray_words[4u * index + 2u],
-                             ray_words[4u * index + 3u]);
+    Ray ray = ray_from_words(ray_words[2u * index], ray_words[2u * index + 1u]);
     ray.dir = traced_dir(ray.dir);
     if (!ray_is_valid(ray)) return ORDER_BUCKETS - 1u;
     uvec3 neg = uvec3(lessThan(ray.dir, vec3(0.0)));

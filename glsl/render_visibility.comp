@@ -45,11 +45,11 @@ void main() {
         Ray ray = rays[i];
         WatertightRay wr = watertight_ray(ray.origin, ray.dir);
         wr.ray_tmax = ray.tmax;
-        float t, u, v, e, err64;
-        double t64;
+        float t, u, v, e, err_x;
+        vec2 t_ff;
         uint result = intersect_triangle_f32(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, ray.tmax, t, u, v, e);
         bool found = (result == TRI_HIT && t <= ray.tmax)
-            || (result == TRI_UNSURE && intersect_triangle_f64(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, t, u, v, t64, err64));
+            || (result == TRI_UNSURE && intersect_triangle_exact(wr, s.v0.xyz, s.v1.xyz, s.v2.xyz, ray.tmin, t, u, v, t_ff, err_x));
         if (!found) {
             // An edge tie: the plane hit, barycentrics clamped into the triangle.
             vec3 e1 = s.v1.xyz - s.v0.xyz;

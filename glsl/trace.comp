@@ -44,9 +44,8 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 layout(set = 0, binding = BINDING_NODES, rg32ui) uniform readonly uimageBuffer node_texels;
 layout(std430, set = 0, binding = BINDING_PRIM_INDICES) readonly buffer PrimIndices { uint prim_indices[]; };
 layout(set = 0, binding = BINDING_TRIANGLES, rgba32ui) uniform readonly uimageBuffer tri_texels;
-// Rays are read as four 64-bit words (bits only, no float64 arithmetic): lavapipe
-// loads storage buffers per lane and per component, so 4 loads beat 8.
-layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { double ray_words[]; };
+// Rays are read as two uvec4 words (bits only; no 64-bit type in any kernel).
+layout(std430, set = 0, binding = BINDING_RAYS) readonly buffer Rays { uvec4 ray_words[]; };
 layout(std430, set = 0, binding = BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
 layout(std430, set = 0, binding = BINDING_COUNTERS) writeonly buffer Counters { uint counters[]; };
 // Side buffers of backtrack and ropes (a 4-byte dummy is bound for the others).
@@ -78,59 +77,93 @@ const float FLT_MAX = 3.40282347e38;
 
 
 // Robust rays from far away (more than SHIFT_DIAGONALS scene diagonals before
-// the box): move the segment frame's origin to the box entry t0 (in f64, kept as
-// two f32) and clip again there, widened by t_err, a bound on the error of any
-// plane distance computed as plane_t does from that origin:
-// - hi = f32(p), lo = f32(p - hi) with p = o + t0 * d in f64: |p - exact| is at
-//   most 2^-52 (|o| + |t0 d|), |hi + lo - p| at most 2^-46 |hi|;
-// - (plane - hi) - lo in f32 adds 2^-24 relative (covered by T_EPS) and 2^-47 |hi|.
-// Doubled, divided by |d| per axis, the largest over the axes the ray moves on.
-// The f32 triangle test then works from hi + lo too (WatertightRay in
-// triangle.glsl), with seg_err = |lo| + 2^20 a per axis (a as below, over
-// EDGE_GAMMA) in its error bounds, and answers in the segment frame; the f64
-// test keeps the ray's own origin and converts its t.
+// the box) move the segment frame's origin to a point p of the ray next to the
+// box, so that decisions carry errors in scene space rather than relative to a
+// huge t. p is the ray's point at t_shift, the f32 parameter where it crosses a
+// plane c just before the box's near face on its dominant axis k (p lies within
+// about sqrt(3) diagonals before the box entry): o + t_shift d summed exactly
+// and rounded once to float-float, within about 2^-47 |p| of the ray at any
+// distance (inputs scaled by powers of two so that no product overflows). The frame's t_shift is that point's parameter
+// (c - o[k]) / d[k], rounded to f32.
+// The f32 triangle test and the plane distances then work from hi + lo (see
+// WatertightRay in triangle.glsl and plane_t in segment.glsl), with a per axis
+// (a bound on |hi + lo - p| plus 2^-45 |hi| for the f32 subtraction of lo) in
+// seg_err = |lo| + 2^20 a and t_err = max a / |d| over the axes the ray moves
+// on; axes along which a / |d| would span a good part of the segment are flat
+// (decided by position, within band). CPU twin: shift_to_scene in
+// src/kdtree/traverse/mod.rs.
 // Only the kernels that trace carefully hold this code (SEGMENT_FRAME): the fast
 // pass lists far rays for the careful one, so near rays do not pay for it.
 // Returns false when the ray misses the box after all.
 bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     vec3 bmin = params.scene_min.xyz;
     vec3 bmax = params.scene_max.xyz;
-    dvec3 o = dvec3(r.wr.origin);
-    dvec3 d = dvec3(r.dir);
-    double t_shift = double(t0);
-    precise dvec3 p = o + t_shift * d;
-    vec3 hi = vec3(p);
-    // A compiler may fold dvec3(vec3(p)) into p, dropping the f32 rounding (Mesa
-    // does, `precise` or not): hi goes back to f64 through its bits XORed with
-    // params.pad0, a push constant that is always 0 and unknown to the compiler.
-    dvec3 hi64 = dvec3(uintBitsToFloat(floatBitsToUint(hi) ^ uvec3(params.pad0)));
-    precise dvec3 rest = p - hi64;
-    vec3 lo = vec3(rest);
-    precise dvec3 a = abs(hi64) * double(1.0 / 35184372088832.0)   // 2^-45
-                      + (abs(o) + abs(t_shift * d)) * double(1.0 / 1125899906842624.0);  // 2^-50
+    uint k = r.wr.kz;
+    vec3 o = r.wr.origin;
+    vec3 d = r.dir;
+    // A plane a little before the near face (1/128 of the box's extent, or of
+    // |face| for a flat box), so that the new frame's origin never lies on the
+    // box's boundary: the walk from there enters the box as a near ray does.
+    precise float margin = (bmax[k] - bmin[k]) * (1.0 / 128.0) + abs(bmin[k]) * (1.0 / 1048576.0) +
+                           abs(bmax[k]) * (1.0 / 1048576.0) + FLT_MIN_NORMAL;
+    precise float c_below = bmin[k] - margin;
+    precise float c_above = bmax[k] + margin;
+    float c = d[k] > 0.0 ? c_below : c_above;
+    // Scaled inputs: d[k] in [1, 2), the origin and c below 2^100 (Veltkamp's
+    // split overflows above 2^113).
+    int eq = exponent_of(abs(d[k]));
+    float om = max(max(abs(o.x), abs(o.y)), max(abs(o.z), abs(c)));
+    int eo = max(exponent_of(om) - 99, 0);
+    precise vec3 ds = vec3(ldexp2(d.x, -eq), ldexp2(d.y, -eq), ldexp2(d.z, -eq));
+    precise vec3 os = vec3(ldexp2(o.x, -eo), ldexp2(o.y, -eo), ldexp2(o.z, -eo));
+    float cs = ldexp2(c, -eo);
+    // The frame's origin is the ray's point at t_shift, the f32 nearest to
+    // (c - o[k]) / d[k]: p = o + t_shift d, summed exactly per axis (an exact
+    // expansion: the far origin's huge terms cancel without loss) and rounded once
+    // to float-float, so p lies on the ray within about 2^-47 |p| per axis, at
+    // exactly the parameter t_shift (which the f32 tests subtract from tmin and
+    // tmax). Scaled: o by 2^-eo and d by 2^-eq, so t_shift by 2^(eq - eo).
+    vec2 t_scaled = ff_div(ff_diff(cs, os[k]), vec2(ds[k], 0.0));
+    float t_shift = ldexp2(t_scaled.x, eo - eq);
+    float ts = ldexp2(t_shift, eq - eo);
+    vec3 hi, lo, a;
+    [[unroll]] for (uint j = 0u; j < 3u; ++j) {
+        vec2 step = ff_two_prod(ts, ds[j]);
+        vec2 p = ff_ldexp(ff_exact_sum8(float[8](os[j], step.x, step.y, 0.0, 0.0, 0.0, 0.0, 0.0)), eo);
+        hi[j] = p.x;
+        lo[j] = p.y;
+        // 2^-45 |p| (the rounding to float-float, with margin) and the error terms
+        // a flushing device drops.
+        precise float aj = abs(p.x) * (1.0 / 35184372088832.0) + ldexp2(1.0, eo - 120);  // 2^-45
+        a[j] = aj;
+    }
     // Flat axes: where a / |d| would exceed T_EPS s_max, s_max a bound on |t| over
-    // the segment in the new frame (the box's span along the ray, from the clip
-    // in the ray's own frame, plus that clip's rounding). There the ray's
-    // coordinate stays within band = a + |d| s_max of hi + lo.
-    precise double s_max = (double(t1) - double(t0)) + double(abs(t1)) * (1.0LF / 1048576.0LF);  // 2^-20
-    double e = 0.0LF;
+    // the segment in the new frame (from p to the clip's t1, plus rounding).
+    // There the ray's coordinate stays within band = a + |d| s_max of hi + lo.
+    precise float s_max = (t1 - t_shift) + abs(t1) * (1.0 / 1048576.0);  // 2^-20
+    float e = 0.0;
     r.flat_axes = 0u;
     r.band = vec3(0.0);
-    for (uint axis = 0u; axis < 3u; ++axis) {
+    [[unroll]] for (uint axis = 0u; axis < 3u; ++axis) {
         if (r.dir[axis] == 0.0) continue;
-        if (a[axis] > double(T_EPS) * s_max * abs(d[axis])) {
+        precise float limit = T_EPS * s_max * abs(d[axis]);
+        if (a[axis] > limit) {
             r.flat_axes |= 1u << axis;
-            r.band[axis] = float((a[axis] + abs(d[axis]) * s_max) * 1.0000010000000000LF);
+            precise float band = (a[axis] + abs(d[axis]) * s_max) * 1.000001;
+            r.band[axis] = band;
         } else {
-            e = max(e, a[axis] / abs(d[axis]));
+            precise float ea = a[axis] * (1.0 / abs(d[axis]));
+            e = max(e, ea);
         }
     }
-    r.t_err = max(float(e * 1.0000010000000000LF), FLT_MIN_NORMAL);
+    precise float t_err = e * 1.000001;
+    r.t_err = max(t_err, FLT_MIN_NORMAL);
     r.wr.seg_origin = hi;
     r.wr.seg_lo = lo;
-    r.wr.seg_err = vec3(abs(rest) + a * 1048576.0LF);  // 2^20
-    r.wr.t_shift = t0;
-    precise float seg_tmax = r.tmax - t0;
+    precise vec3 seg_err = abs(lo) + a * 1048576.0;  // 2^20
+    r.wr.seg_err = seg_err;
+    r.wr.t_shift = t_shift;
+    precise float seg_tmax = r.tmax - t_shift;
     r.wr.seg_tmax = seg_tmax;
     return clip_to_box(r, bmin, bmax, t0, t1);
 }
@@ -185,8 +218,7 @@ bool run_traversal(bool alive, TraceRay r, float t0, float t1, inout Closest bes
 // that met a pair the f32 tests could not decide is listed for the careful pass
 // instead, and nothing is written for it.
 void trace_ray(uint index) {
-    Ray ray = ray_from_words(ray_words[4u * index], ray_words[4u * index + 1u], ray_words[4u * index + 2u],
-                             ray_words[4u * index + 3u]);
+    Ray ray = ray_from_words(ray_words[2u * index], ray_words[2u * index + 1u]);
 
     Closest best = closest_none(ray.tmax);
     TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
@@ -240,8 +272,9 @@ void trace_ray(uint index) {
     }
     Hit hit = best.hit;
     if (!finished && hit.prim_id != PRIM_INVALID) hit.prim_id = PRIM_INCOMPLETE;
-    // Back to the ray's own parameter (one rounding, in f64).
-    if (SEGMENT_FRAME && r.wr.t_shift != 0.0) hit.t = float(double(hit.t) + double(r.wr.t_shift));
+    // Back to the ray's own parameter (one rounding: an f32 sum is correctly rounded).
+    precise float t_own = hit.t + r.wr.t_shift;
+    if (SEGMENT_FRAME && r.wr.t_shift != 0.0) hit.t = t_own;
     if (hit.prim_id >= PRIM_INCOMPLETE) {
         hit.t = hit.prim_id == PRIM_MISS ? uintBitsToFloat(0x7f800000u) : uintBitsToFloat(0x7fc00000u);
         hit.u = 0.0;

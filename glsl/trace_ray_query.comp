@@ -17,6 +17,7 @@
 
 #include "ray.glsl"
 #include "ray_checks.glsl"
+#include "ff.glsl"
 
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
@@ -33,24 +34,26 @@ layout(push_constant) uniform Push { TraceParams params; };
 #define INF uintBitsToFloat(0x7f800000u)
 #define NAN uintBitsToFloat(0x7fc00000u)
 
-// The part [t0, t1] of the line o + t d inside the scene box, in f64 (false: it
-// misses the box).
-bool line_in_box(vec3 o, vec3 d, out double t0, out double t1) {
-    t0 = double(-INF);
-    t1 = double(INF);
+// The part [t0, t1] of the line o + t d inside the scene box, in float-float
+// (ff.glsl; false: it misses the box).
+bool line_in_box(vec3 o, vec3 d, out vec2 t0, out vec2 t1) {
+    t0 = vec2(-INF, 0.0);
+    t1 = vec2(INF, 0.0);
     for (uint axis = 0u; axis < 3u; ++axis) {
-        double lo = double(params.scene_min[axis]);
-        double hi = double(params.scene_max[axis]);
+        float lo = params.scene_min[axis];
+        float hi = params.scene_max[axis];
         if (d[axis] == 0.0) {
-            if (double(o[axis]) < lo || double(o[axis]) > hi) return false;
+            if (o[axis] < lo || o[axis] > hi) return false;
             continue;
         }
-        double a = (lo - double(o[axis])) / double(d[axis]);
-        double b = (hi - double(o[axis])) / double(d[axis]);
-        t0 = max(t0, min(a, b));
-        t1 = min(t1, max(a, b));
+        vec2 a = ff_div(ff_diff(lo, o[axis]), ff_from(d[axis]));
+        vec2 b = ff_div(ff_diff(hi, o[axis]), ff_from(d[axis]));
+        vec2 near = ff_le(a, b) ? a : b;
+        vec2 far = ff_le(a, b) ? b : a;
+        if (ff_le(t0, near)) t0 = near;
+        if (ff_le(far, t1)) t1 = far;
     }
-    return t0 <= t1;
+    return ff_le(t0, t1);
 }
 
 // The closest (or, ANY_HIT, the first found) hit of a valid ray with a finite
@@ -67,16 +70,23 @@ Hit trace_query(Ray ray) {
     // near the scene. t goes back to the ray's parameter below.
     float shift = 0.0;
     if (tmin < 0.0) {
-        double t0, t1;
+        vec2 t0, t1;
         if (!line_in_box(ray.origin, ray.dir, t0, t1)) return miss;
-        if (t0 >= 0.0) {
+        if (t0.x >= 0.0) {
             tmin = 0.0;  // no part of the box lies behind the origin
         } else {
-            double start = max(double(tmin), t0 - (t1 - t0) * (1.0LF / 65536.0LF));
-            shift = float(start);
-            origin = vec3(dvec3(ray.origin) + double(shift) * dvec3(ray.dir));
-            tmin = max(float(double(tmin) - double(shift)), 0.0);
-            tmax = float(double(tmax) - double(shift));
+            vec2 margin = ff_mul_f(ff_sub(t1, t0), 1.0 / 65536.0);
+            vec2 start = ff_sub(t0, margin);
+            shift = ff_ge_f(start, tmin) ? start.x : tmin;
+            // The start point, rounded once from float-float.
+            for (uint axis = 0u; axis < 3u; ++axis) {
+                origin[axis] = ff_add_f(ff_two_prod(shift, ray.dir[axis]), ray.origin[axis]).x;
+            }
+            // f32 differences and sums of two f32 are correctly rounded.
+            precise float tmin_shifted = tmin - shift;
+            precise float tmax_shifted = tmax - shift;
+            tmin = max(tmin_shifted, 0.0);
+            tmax = tmax_shifted;
         }
         if (!(tmin <= tmax)) return miss;
     }
@@ -96,7 +106,8 @@ Hit trace_query(Ray ray) {
     float t = rayQueryGetIntersectionTEXT(query, true);
     vec2 uv = rayQueryGetIntersectionBarycentricsEXT(query, true);  // the weights of v1 and v2
     uint prim = prim_ids[rayQueryGetIntersectionPrimitiveIndexEXT(query, true)];
-    if (shift != 0.0) t = float(double(t) + double(shift));
+    precise float t_own = t + shift;
+    if (shift != 0.0) t = t_own;
     return Hit(t, prim, uv.x, uv.y);
 }
 

@@ -1,6 +1,7 @@
 //! Geometry shared by the builder, the CPU traversals and the GPU layouts:
 //! boxes, rays, hits and the watertight ray/triangle test.
 
+use crate::ff::{exact_sum8, two_prod, Ff};
 use glam::Vec3;
 
 pub use crate::abi::{Hit, Ray};
@@ -134,7 +135,7 @@ pub struct WatertightRay {
     pub sy: f32,
     /// Scale `1 / dir[kz]`.
     pub sz: f32,
-    /// Ray origin; the f64 test translates the vertices by `-origin` before the shear.
+    /// Ray origin; the exact test of an unshifted ray works from it.
     pub origin: Vec3,
     /// The segment frame (`TraceRay` in `glsl/traverse/segment.glsl`): the f32
     /// test translates by `-(seg_origin + seg_lo)`, the point `origin +
@@ -150,15 +151,15 @@ pub struct WatertightRay {
     pub t_shift: f32,
     /// `ray_tmax - t_shift`: the ray's own end in the segment frame (f32 test).
     pub seg_tmax: f32,
-    /// Ray direction, for the f64 fallback near edges.
+    /// Ray direction, for the exact fallback near edges.
     pub dir: Vec3,
     /// The ray's own `tmax` (the `tmax` argument of [`WatertightRay::intersect`]
-    /// may be the closest hit so far): the f64 decision near the ray's end uses
+    /// may be the closest hit so far): the exact decision near the ray's end uses
     /// it, so a triangle's answer never depends on what was tested before it.
     /// `+inf` from [`WatertightRay::new`]; set it with [`WatertightRay::with_tmax`].
     pub ray_tmax: f32,
-    /// The f64 fallback near edges and bounds (`Traversal::robust`; true from
-    /// [`WatertightRay::new`]). False: the plain test, with the f64 recompute only
+    /// The exact (float-float) fallback near edges and bounds (`Traversal::robust`; true from
+    /// [`WatertightRay::new`]). False: the plain test, with the float-float recompute only
     /// at an edge function of exactly 0.
     pub robust: bool,
 }
@@ -167,29 +168,43 @@ pub struct WatertightRay {
 /// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
 pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
 
-/// The f64 product `a·b` as `p + e` exactly (Dekker 1971, Veltkamp's split; no
-/// FMA, so every IEEE device gives the same bits). Twin of `two_product` in
-/// `glsl/shared/triangle.glsl`.
+/// The exponent `e` of `x = m·2^e`, `m` in `[1, 2)` (0 for `x = 0`). Twin of
+/// `exponent_of` in triangle.glsl.
 #[inline]
-fn two_product(a: f64, b: f64) -> (f64, f64) {
-    let split = |x: f64| {
-        let c = 134_217_729.0 * x;
-        let hi = c - (c - x);
-        (hi, x - hi)
-    };
-    let ((a_hi, a_lo), (b_hi, b_lo)) = (split(a), split(b));
-    let p = a * b;
-    (p, ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo)
+pub(crate) fn exponent_of(x: f32) -> i32 {
+    if x == 0.0 {
+        0
+    } else {
+        ((x.to_bits() >> 23) & 0xff) as i32 - 127
+    }
 }
 
-/// `a·b − c·d` in f64 from exact products: 0 exactly when `a·b == c·d`, and of
-/// the exact sign unless the products' rounding errors cancel their difference.
-/// Twin of `diff_of_products` in `glsl/shared/triangle.glsl`.
+/// `2^k` for `k` in `[-126, 127]` (clamped to it). Twin of `pow2`.
 #[inline]
-fn diff_of_products(a: f64, b: f64, c: f64, d: f64) -> f64 {
-    let (p1, e1) = two_product(a, b);
-    let (p2, e2) = two_product(c, d);
-    (p1 - p2) + (e1 - e2)
+fn pow2(k: i32) -> f32 {
+    f32::from_bits(((k.clamp(-126, 127) + 127) as u32) << 23)
+}
+
+/// The sheared coordinate `(v - o)·dz - s·(v_z - o_z)` from offsets scaled by
+/// `2^-eo`, exactly up to one rounding. Twin of `sheared_exact` in triangle.glsl.
+fn sheared_exact(v: f32, v_z: f32, o: f32, o_z: f32, dz: f32, s: f32, eo: i32) -> Ff {
+    let p = ff_ldexp(Ff::diff(v, o), -eo);
+    let q = ff_ldexp(Ff::diff(v_z, o_z), -eo);
+    let (pa, pb, pc, pd) = (two_prod(p.hi, dz), two_prod(p.lo, dz), two_prod(q.hi, -s), two_prod(q.lo, -s));
+    exact_sum8([pa.hi, pa.lo, pb.hi, pb.lo, pc.hi, pc.lo, pd.hi, pd.lo])
+}
+
+/// `x·2^k` in two exact steps (barring overflow and underflow). Twin of `ldexp2`.
+#[inline]
+pub(crate) fn ldexp2(x: f32, k: i32) -> f32 {
+    let k1 = k / 2;
+    (x * pow2(k1)) * pow2(k - k1)
+}
+
+/// Twin of `ff_ldexp`.
+#[inline]
+pub(crate) fn ff_ldexp(x: Ff, k: i32) -> Ff {
+    Ff { hi: ldexp2(x.hi, k), lo: ldexp2(x.lo, k) }
 }
 
 /// The answer of the f32 watertight test ([`WatertightRay::intersect_f32`]).
@@ -199,7 +214,7 @@ pub enum TriTest {
     Miss,
     /// A hit: `(t, u, v, e)`, `e` a bound on the error of `t` (0 unless robust).
     Hit(f32, f32, f32, f32),
-    /// Rounding could decide it: ask [`WatertightRay::intersect_f64`].
+    /// Rounding could decide it: ask [`WatertightRay::intersect_exact`].
     Unsure,
 }
 
@@ -249,7 +264,7 @@ impl WatertightRay {
     /// The watertight ray/triangle test. Returns `(t, u, v)` when the ray hits the
     /// triangle at `tmin <= t <= tmax` (edges and vertices count as hits, both
     /// faces are hit, a ray in the triangle's plane misses): the f32 test, and
-    /// the f64 one when the f32 test is unsure. Every operation is the shader's,
+    /// the exact one when the f32 test is unsure. Every operation is the shader's,
     /// in the same order, so CPU and GPU give the same bits.
     #[inline]
     pub fn intersect(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
@@ -257,7 +272,7 @@ impl WatertightRay {
             TriTest::Hit(t, u, v, _) => (t <= tmax).then_some((t, u, v)),
             TriTest::Miss => None,
             TriTest::Unsure => {
-                self.intersect_f64(v0, v1, v2, tmin).filter(|h| h.0 <= tmax).map(|(t, u, v, _, _)| (t, u, v))
+                self.intersect_exact(v0, v1, v2, tmin).filter(|h| h.0 <= tmax).map(|(t, u, v, _, _)| (t, u, v))
             }
         }
     }
@@ -265,14 +280,14 @@ impl WatertightRay {
     /// The f32 test (`intersect_triangle_f32` in triangle.glsl): a hit, a miss,
     /// or unsure when rounding could decide it — an edge function or the
     /// distance to the ray's bounds within its error bound; then
-    /// [`WatertightRay::intersect_f64`] decides. Whether a pair is unsure does
+    /// [`WatertightRay::intersect_exact`] decides. Whether a pair is unsure does
     /// not depend on `tmax` (the closest hit so far).
     ///
     /// When robust, a hit carries `e`, a bound on `|t - exact t|` (the edge
     /// functions' errors carried through `t = Σ u_i z_i / Σ u_i`, plus the
     /// rounding of `t`), and a hit whose interval `[t - e, t]` reaches `tmax`
     /// counts (`t <= ray_tmax` still holds), so that callers can order two hits
-    /// whose `t` lie within rounding of each other in f64.
+    /// whose `t` lie within rounding of each other in float-float.
     #[inline]
     pub fn intersect_f32(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32, tmax: f32) -> TriTest {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
@@ -290,12 +305,11 @@ impl WatertightRay {
         let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
         let (mut eu, mut ev, mut ew) = (0.0f32, 0.0f32, 0.0f32);
         if !self.robust {
-            // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
+            // Plain Woop, Benthin & Wald: recompute in float-float only at an edge function of 0.
             if u == 0.0 || v == 0.0 || w == 0.0 {
-                let (ax, ay, bx, by, cx, cy) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-                u = (cx * by - cy * bx) as f32;
-                v = (ax * cy - ay * cx) as f32;
-                w = (bx * ay - by * ax) as f32;
+                u = two_prod(cx, by).sub(two_prod(cy, bx)).hi;
+                v = two_prod(ax, cy).sub(two_prod(ay, cx)).hi;
+                w = two_prod(bx, ay).sub(two_prod(by, ax)).hi;
             }
             if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
                 return TriTest::Miss;
@@ -325,7 +339,7 @@ impl WatertightRay {
             if negative && positive {
                 return TriTest::Miss;
             }
-            // Any sign in doubt: decide in f64.
+            // Any sign in doubt: decide exactly.
             if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
                 return TriTest::Unsure;
             }
@@ -351,7 +365,7 @@ impl WatertightRay {
             let spread = az.max(bz).max(cz) - az.min(bz).min(cz);
             e = (t_err + weights_err * spread + EDGE_GAMMA * t_scaled.abs()) / det.abs() + EDGE_GAMMA * t.abs();
             // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
-            // surface, a shadow ray ending on a vertex): decide in f64 which side of the
+            // surface, a shadow ray ending on a vertex): decide exactly which side of the
             // bound it lies on (see triangle.glsl).
             let near_tmin = !tmin.is_infinite() && (t - tmin).abs() <= e;
             let near_tmax = !self.seg_tmax.is_infinite() && (t - self.seg_tmax).abs() <= e;
@@ -366,71 +380,116 @@ impl WatertightRay {
         TriTest::Hit(t, v * rcp_det, w * rcp_det, e)
     }
 
-    /// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the
-    /// ray's bounds: the vertices sheared as in the f32 test but scaled by
+    /// The test in float-float ([`crate::ff`]) on the f32 inputs, for rays near
+    /// an edge, a vertex or the ray's bounds (`intersect_triangle_exact` in
+    /// triangle.glsl, where its guarantees are spelled out): from the segment
+    /// frame's origin `seg_origin + seg_lo`, offsets and direction scaled by powers
+    /// of two to about 1, the vertices sheared as in the f32 test but scaled by
     /// `|dir[kz]|` instead of divided by `dir[kz]`, so each vertex's 2D
-    /// coordinates are the same for every triangle sharing it, and 2D edge
-    /// functions with exact signs (`diff_of_products`): the triangles around an
-    /// edge or vertex tile the plane exactly, and a ray through a vertex hits one
-    /// of them, never none.
+    /// coordinates are the same for every triangle sharing it, and antisymmetric
+    /// 2D edge functions: the triangles around an edge or vertex tile the plane,
+    /// and a ray through a vertex hits one of them, never none.
     ///
-    /// The hit's `t` lies in `[tmin, ray_tmax]` (exactly, in f64, in the ray's
-    /// own parameter); the answer is `(t, u, v, t64, err)` in the segment frame
-    /// (`t - t_shift`), `t64` the f64 `t` by which callers order hits whose f32
-    /// `t` lie within rounding of each other, and, for a shifted ray, `err` a
-    /// bound on `t64`'s error (0 otherwise: callers use `EDGE_GAMMA·|t|`).
-    pub fn intersect_f64(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32) -> Option<(f32, f32, f32, f64, f32)> {
-        let (o, d) = (self.origin.as_dvec3(), self.dir.as_dvec3());
-        let a = v0.as_dvec3() - o;
-        let b = v1.as_dvec3() - o;
-        let c = v2.as_dvec3() - o;
+    /// The hit's `t` lies in `[tmin, ray_tmax]` (in float-float, in the ray's own
+    /// parameter); the answer is `(t, u, v, t_ff, err)` in the segment frame
+    /// (`t - t_shift`), `t_ff` the float-float `t` by which callers order hits
+    /// whose f32 `t` lie within rounding of each other, and, for a shifted ray,
+    /// `err` a bound on `t_ff`'s error (0 otherwise: callers use `EDGE_GAMMA·|t|`).
+    pub fn intersect_exact(&self, v0: Vec3, v1: Vec3, v2: Vec3, tmin: f32) -> Option<(f32, f32, f32, Ff, f32)> {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
+        let o = |i: usize| Ff { hi: (self.seg_origin[i]), lo: (self.seg_lo[i]) };
+        let offsets = |v: Vec3| [0, 1, 2].map(|i| Ff::from_f32(v[i]).sub(o(i)));
+        let (mut a, mut b, mut c) = (offsets(v0), offsets(v1), offsets(v2));
+        // Scale: the offsets by 2^-es (largest about 1), the direction by 2^-eq.
+        let mut m = 0.0f32;
+        for i in 0..3 {
+            m = m.max(a[i].hi.abs().max(b[i].hi.abs().max(c[i].hi.abs())));
+        }
+        let es = exponent_of(m);
+        let eq = exponent_of(self.dir[kz].abs());
+        let d = [0, 1, 2].map(|i| ldexp2(self.dir[i], -eq));
+        for i in 0..3 {
+            a[i] = ff_ldexp(a[i], -es);
+            b[i] = ff_ldexp(b[i], -es);
+            c[i] = ff_ldexp(c[i], -es);
+        }
         let dz = d[kz].abs();
-        let sign = if d[kz] < 0.0 { -1.0 } else { 1.0 };
-        let (sx, sy) = (d[kx] * sign, d[ky] * sign);
-        let ax = a[kx] * dz - sx * a[kz];
-        let ay = a[ky] * dz - sy * a[kz];
-        let bx = b[kx] * dz - sx * b[kz];
-        let by = b[ky] * dz - sy * b[kz];
-        let cx = c[kx] * dz - sx * c[kz];
-        let cy = c[ky] * dz - sy * c[kz];
+        let (sx, sy) = if d[kz] < 0.0 { (-d[kx], -d[ky]) } else { (d[kx], d[ky]) };
+        // The 2D coordinates from the ray's own origin, exactly up to one rounding
+        // each (see triangle.glsl).
+        let [ax, ay, bx, by, cx, cy] = {
+            let o = self.origin;
+            let vm = v0.abs().max(v1.abs()).max(v2.abs());
+            let om = o.x.abs().max(o.y.abs()).max(o.z.abs()).max(vm.x.max(vm.y).max(vm.z));
+            let eo = (exponent_of(om) - 99).max(0);
+            let exact = |v: Vec3, k: usize, s: f32| sheared_exact(v[k], v[kz], o[k], o[kz], dz, s, eo);
+            let coords = [
+                exact(v0, kx, sx),
+                exact(v0, ky, sy),
+                exact(v1, kx, sx),
+                exact(v1, ky, sy),
+                exact(v2, kx, sx),
+                exact(v2, ky, sy),
+            ];
+            let sm = coords.iter().fold(0.0f32, |m, c| m.max(c.hi.abs()));
+            let e2 = exponent_of(sm);
+            coords.map(|c| ff_ldexp(c, -e2))
+        };
         // The edge functions times dir[kz]²: u for the edge v1-v2, v for v2-v0, w for v0-v1.
-        let u = diff_of_products(cx, by, cy, bx);
-        let v = diff_of_products(ax, cy, ay, cx);
-        let w = diff_of_products(bx, ay, by, ax);
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        let u = cx.mul(by).sub(cy.mul(bx));
+        let v = ax.mul(cy).sub(ay.mul(cx));
+        let w = bx.mul(ay).sub(by.mul(ax));
+        if (u.hi < 0.0 || v.hi < 0.0 || w.hi < 0.0) && (u.hi > 0.0 || v.hi > 0.0 || w.hi > 0.0) {
             return None;
         }
-        let det = u + v + w;
-        if det == 0.0 {
+        let det = u.add(v).add(w);
+        if det.hi == 0.0 {
             return None;
         }
-        // t from the plane, with the normal from the (exact) f32 edge differences:
-        // an origin on a triangle in an axis plane gives t = 0 exactly.
-        let (e1, e2) = (v1.as_dvec3() - v0.as_dvec3(), v2.as_dvec3() - v0.as_dvec3());
-        let nx = e1.y * e2.z - e1.z * e2.y;
-        let ny = e1.z * e2.x - e1.x * e2.z;
-        let nz = e1.x * e2.y - e1.y * e2.x;
-        let num = a.x * nx + a.y * ny + a.z * nz;
-        let den = d.x * nx + d.y * ny + d.z * nz;
-        if den == 0.0 {
+        // t from the plane, with the normal from the (exact) edge differences,
+        // scaled like the offsets: an origin on a triangle in an axis plane gives
+        // t = 0 exactly.
+        let e1 = [0, 1, 2].map(|i| ff_ldexp(Ff::diff(v1[i], v0[i]), -es));
+        let e2 = [0, 1, 2].map(|i| ff_ldexp(Ff::diff(v2[i], v0[i]), -es));
+        let n = [
+            e1[1].mul(e2[2]).sub(e1[2].mul(e2[1])),
+            e1[2].mul(e2[0]).sub(e1[0].mul(e2[2])),
+            e1[0].mul(e2[1]).sub(e1[1].mul(e2[0])),
+        ];
+        let num = a[0].mul(n[0]).add(a[1].mul(n[1])).add(a[2].mul(n[2]));
+        let den = n[0].mul_f(d[0]).add(n[1].mul_f(d[1])).add(n[2].mul_f(d[2]));
+        if den.hi == 0.0 {
             return None;
         }
-        let t64 = num / den;
-        // Exact against the ray's bounds.
-        if !(t64 >= tmin as f64 && t64 <= self.ray_tmax as f64) {
+        // The ray's own bounds, on the signs of num - b·den (see triangle.glsl).
+        let bound = |b: f32| ff_ldexp(Ff::diff(b, self.t_shift), eq - es);
+        let above_min = if tmin.is_infinite() { tmin < 0.0 } else { num.quotient_ge(den, bound(tmin)) };
+        let below_max =
+            if self.ray_tmax.is_infinite() { self.ray_tmax > 0.0 } else { num.quotient_le(den, bound(self.ray_tmax)) };
+        if !(above_min && below_max) {
             return None;
         }
-        // The segment frame (see triangle.glsl): t less t_shift, with a bound on
-        // the error of num, den and the subtraction when shifted.
-        let t_seg = t64 - self.t_shift as f64;
+        // t along the unscaled direction: t' 2^(es - eq).
+        let t_scaled = num.div(den);
+        let t = ff_ldexp(t_scaled, es - eq);
         let mut err = 0.0f32;
         if self.t_shift != 0.0 {
-            let num_mag = (a.x * nx).abs() + (a.y * ny).abs() + (a.z * nz).abs();
-            let den_mag = (d.x * nx).abs() + (d.y * ny).abs() + (d.z * nz).abs();
-            let bound = (num_mag + t64.abs() * den_mag) / den.abs() * 2f64.powi(-49) + t64.abs() * 2f64.powi(-50);
-            err = (bound * 1.000001) as f32;
+            // See triangle.glsl: the shifted origin's error and the arithmetic's.
+            let origin_err = ldexp2(
+                EDGE_GAMMA
+                    * (self.seg_err.x * n[0].hi.abs()
+                        + self.seg_err.y * n[1].hi.abs()
+                        + self.seg_err.z * n[2].hi.abs()),
+                -es,
+            );
+            let num_mag = (a[0].hi * n[0].hi).abs() + (a[1].hi * n[1].hi).abs() + (a[2].hi * n[2].hi).abs();
+            let den_mag = (d[0] * n[0].hi).abs() + (d[1] * n[1].hi).abs() + (d[2] * n[2].hi).abs();
+            let rel = 1.0 / 1_099_511_627_776.0; // 2^-40
+            let bound = (origin_err + (num_mag + t_scaled.hi.abs() * den_mag) * rel) * (1.0 / den.hi.abs())
+                + t_scaled.hi.abs() * rel;
+            err = ldexp2(bound, es - eq) * 1.0001;
         }
-        Some((t_seg as f32, (v / det) as f32, (w / det) as f32, t_seg, err))
+        let rcp_det = 1.0 / det.hi;
+        Some((t.hi, (v.hi * rcp_det), (w.hi * rcp_det), t, err))
     }
 }

@@ -144,6 +144,7 @@ pub mod consts;
 pub mod error;
 #[cfg(any(feature = "exact", test))]
 pub mod exact;
+pub mod ff;
 pub mod geom;
 pub mod gpu;
 pub mod io;

@@ -174,12 +174,10 @@ fn device_destruction_reports_what_is_left() {
 
 #[test]
 fn adopting_checks_features_and_queue() {
+    // No core feature is required (the kernels use no 64-bit type): a device
+    // created with none is adopted (tests/portability.rs traces and renders on one).
     let engine = Engine::new(validation(), false).unwrap();
-    match engine.kdtrace_context() {
-        Err(Error::DeviceLimit(m)) => assert!(m.contains("shaderFloat64"), "{m}"),
-        Err(e) => panic!("unexpected error: {e}"),
-        Ok(_) => panic!("a device without shaderFloat64 must be refused"),
-    }
+    assert!(engine.kdtrace_context().is_ok(), "a device without shaderFloat64 must be accepted");
     let messages = engine.shutdown().unwrap();
     assert!(messages.is_empty(), "{messages:?}");
 

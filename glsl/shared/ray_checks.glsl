@@ -3,18 +3,13 @@
 #ifndef RAY_CHECKS_GLSL
 #define RAY_CHECKS_GLSL
 
-// A ray from its 32-byte record read as four 64-bit words (bits only: lavapipe
-// loads storage buffers per lane and per component, so 4 loads beat 8).
-Ray ray_from_words(double a, double b, double c, double d) {
-    uvec2 w0 = unpackDouble2x32(a);
-    uvec2 w1 = unpackDouble2x32(b);
-    uvec2 w2 = unpackDouble2x32(c);
-    uvec2 w3 = unpackDouble2x32(d);
+// A ray from its 32-byte record read as two uvec4 words (bits only).
+Ray ray_from_words(uvec4 a, uvec4 b) {
     Ray ray;
-    ray.origin = uintBitsToFloat(uvec3(w0, w1.x));
-    ray.tmin = uintBitsToFloat(w1.y);
-    ray.dir = uintBitsToFloat(uvec3(w2, w3.x));
-    ray.tmax = uintBitsToFloat(w3.y);
+    ray.origin = uintBitsToFloat(a.xyz);
+    ray.tmin = uintBitsToFloat(a.w);
+    ray.dir = uintBitsToFloat(b.xyz);
+    ray.tmax = uintBitsToFloat(b.w);
     return ray;
 }
 

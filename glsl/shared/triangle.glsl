@@ -17,6 +17,8 @@
 #ifndef TRIANGLE_GLSL
 #define TRIANGLE_GLSL
 
+#include "ff.glsl"
+
 // The f64 test works from `origin`, in the ray's own parameter. The f32 test
 // works in the segment frame (TraceRay in traverse/segment.glsl): from the point
 // seg_origin + seg_lo = origin + t_shift * dir (a far ray moved to the scene
@@ -66,101 +68,166 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
 // (EDGE_GAMMA_LOG2 from src/consts.rs).
 const float EDGE_GAMMA = 1.0 / float(1u << EDGE_GAMMA_LOG2);
 
-// The f64 product a*b as p + e exactly (Dekker 1971: Veltkamp's split into
-// 26-bit halves, no FMA, so every IEEE device gives the same bits; lavapipe does
-// not fuse fma).
-void two_product(double a, double b, out double p, out double e) {
-    precise double ca = 134217729.0 * a;
-    precise double a_hi = ca - (ca - a);
-    precise double a_lo = a - a_hi;
-    precise double cb = 134217729.0 * b;
-    precise double b_hi = cb - (cb - b);
-    precise double b_lo = b - b_hi;
-    precise double prod = a * b;
-    precise double err = ((a_hi * b_hi - prod) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo;
-    p = prod;
-    e = err;
+// The exponent e of x = m 2^e, m in [1, 2) (0 for x = 0; x normal).
+int exponent_of(float x) {
+    return x == 0.0 ? 0 : int((floatBitsToUint(x) >> 23) & 0xffu) - 127;
 }
 
-// a*b - c*d in f64 from exact products: 0 exactly when a*b == c*d, and of the
-// exact sign unless the products' rounding errors cancel their difference.
-double diff_of_products(double a, double b, double c, double d) {
-    double p1, e1, p2, e2;
-    two_product(a, b, p1, e1);
-    two_product(c, d, p2, e2);
-    precise double r = (p1 - p2) + (e1 - e2);
-    return r;
+// 2^k for k in [-126, 127] (clamped to it), from its bits.
+float pow2(int k) {
+    return uintBitsToFloat(uint(clamp(k, -126, 127) + 127) << 23);
 }
 
-// The test in f64 on the f32 inputs, for rays near an edge, a vertex or the
-// ray's bounds (see the top). The vertices are sheared as in the f32 test but
-// scaled by |d[kz]| instead of divided by d[kz]: each vertex's 2D coordinates are
-// the same for every triangle sharing it, and the 2D edge functions have exact
-// signs, so the triangles around an edge or vertex tile the plane exactly: a ray
-// through a vertex hits one of them, never none.
+// x 2^k for k in [-252, 254], in two exact steps (barring overflow and underflow).
+vec2 ff_ldexp(vec2 x, int k) {
+    int k1 = k / 2;
+    precise vec2 y = (x * pow2(k1)) * pow2(k - k1);
+    return y;
+}
+float ldexp2(float x, int k) {
+    int k1 = k / 2;
+    precise float y = (x * pow2(k1)) * pow2(k - k1);
+    return y;
+}
+
+// The sheared coordinate (v - o) dz - s (v_z - o_z) of a vertex (one of its 2D
+// coordinates in the watertight test, the direction scaled), from the offsets
+// v - o and v_z - o_z scaled by 2^-eo, exactly up to one rounding to float-float.
+vec2 sheared_exact(float v, float v_z, float o, float o_z, float dz, float s, int eo) {
+    vec2 p = ff_ldexp(ff_diff(v, o), -eo);
+    vec2 q = ff_ldexp(ff_diff(v_z, o_z), -eo);
+    vec2 pa = ff_two_prod(p.x, dz);
+    vec2 pb = ff_two_prod(p.y, dz);
+    vec2 pc = ff_two_prod(q.x, -s);
+    vec2 pd = ff_two_prod(q.y, -s);
+    return ff_exact_sum8(float[8](pa.x, pa.y, pb.x, pb.y, pc.x, pc.y, pd.x, pd.y));
+}
+
+// The test in float-float (ff.glsl) on the f32 inputs, for rays near an edge, a
+// vertex or the ray's bounds (see the top). Its 2D coordinates come from the
+// ray's own origin (exact expansions for a shifted ray, sheared_exact); its t
+// from the segment frame's origin seg_origin + seg_lo, with the
+// vertices' offsets and the direction scaled by powers of two to about 1 (no
+// overflow, no flushed error terms). The vertices are sheared as in the f32 test
+// but scaled by |d[kz]| instead of divided by d[kz]: each vertex's 2D coordinates
+// are the same for every triangle sharing it, and the 2D edge functions are
+// antisymmetric with signs exact unless the ray passes within about 2^-44 of the
+// edge (relative to the coordinates), so the triangles around an edge or vertex
+// tile the plane: a ray through a vertex hits one of them, never none.
 //
-// The hit's t lies in [tmin, r.ray_tmax] (exactly, in f64); `t64_out` is its f64
-// value, by which callers order hits whose f32 t lie within rounding of each
-// other (see intersect_leaf in traverse/leaf.glsl).
-//
-// Answers in the segment frame: t_out and t64_out are t - t_shift, and for a
-// shifted ray err_out bounds t64_out's error (num, den and the subtraction;
-// 0 unshifted, where callers use EDGE_GAMMA |t|).
-bool intersect_triangle_f64(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin,
-                            out float t_out, out float u_out, out float v_out, out double t64_out,
-                            out float err_out) {
-    dvec3 o = dvec3(r.origin);
-    dvec3 d = dvec3(r.dir);
-    precise dvec3 a = dvec3(v0) - o;
-    precise dvec3 b = dvec3(v1) - o;
-    precise dvec3 c = dvec3(v2) - o;
+// The hit's t lies in [tmin, r.ray_tmax] (in float-float, in the ray's own
+// parameter: t - t_shift + t_shift). Answers in the segment frame: t_out and
+// tff_out are t - t_shift (tff_out in float-float, by which callers order hits
+// whose f32 t lie within rounding of each other, see intersect_leaf in
+// traverse/leaf.glsl); for a shifted ray err_out bounds tff_out's error (the
+// shifted origin's error and the arithmetic's; 0 unshifted, where callers use
+// EDGE_GAMMA |t|).
+bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tmin,
+                              out float t_out, out float u_out, out float v_out, out vec2 tff_out,
+                              out float err_out) {
     uint kx = r.kx, ky = r.ky, kz = r.kz;
-    double dz = abs(d[kz]);
-    double sign = d[kz] < 0.0 ? -1.0 : 1.0;
-    double sx = d[kx] * sign;
-    double sy = d[ky] * sign;
-    precise double ax = a[kx] * dz - sx * a[kz];
-    precise double ay = a[ky] * dz - sy * a[kz];
-    precise double bx = b[kx] * dz - sx * b[kz];
-    precise double by = b[ky] * dz - sy * b[kz];
-    precise double cx = c[kx] * dz - sx * c[kz];
-    precise double cy = c[ky] * dz - sy * c[kz];
+    // The offsets v - origin in float-float, exactly up to the rounding of seg_lo.
+    vec2 a[3], b[3], c[3];
+    for (uint i = 0u; i < 3u; ++i) {
+        vec2 o = vec2(r.seg_origin[i], r.seg_lo[i]);
+        a[i] = ff_sub(ff_from(v0[i]), o);
+        b[i] = ff_sub(ff_from(v1[i]), o);
+        c[i] = ff_sub(ff_from(v2[i]), o);
+    }
+    // Scale: the offsets by 2^-es (largest about 1), the direction by 2^-eq.
+    float m = 0.0;
+    for (uint i = 0u; i < 3u; ++i) m = max(m, max(abs(a[i].x), max(abs(b[i].x), abs(c[i].x))));
+    int es = exponent_of(m);
+    int eq = exponent_of(abs(r.dir[kz]));
+    precise vec3 d = vec3(ldexp2(r.dir.x, -eq), ldexp2(r.dir.y, -eq), ldexp2(r.dir.z, -eq));
+    for (uint i = 0u; i < 3u; ++i) {
+        a[i] = ff_ldexp(a[i], -es);
+        b[i] = ff_ldexp(b[i], -es);
+        c[i] = ff_ldexp(c[i], -es);
+    }
+    float dz = abs(d[kz]);
+    float sx = d[kz] < 0.0 ? -d[kx] : d[kx];
+    float sy = d[kz] < 0.0 ? -d[ky] : d[ky];
+    // The 2D coordinates from the ray's own origin, exactly up to one rounding
+    // each (sheared_exact; the shear is the same from every point of the ray, and
+    // a shifted origin is off the ray by its error bound, which at a vertex or an
+    // edge decides the answer).
+    vec2 ax, ay, bx, by, cx, cy;
+    {
+        vec3 o = r.origin;
+        vec3 vm = max(max(abs(v0), abs(v1)), abs(v2));
+        float om = max(max(max(abs(o.x), abs(o.y)), abs(o.z)), max(max(vm.x, vm.y), vm.z));
+        int eo = max(exponent_of(om) - 99, 0);
+        ax = sheared_exact(v0[kx], v0[kz], o[kx], o[kz], dz, sx, eo);
+        ay = sheared_exact(v0[ky], v0[kz], o[ky], o[kz], dz, sy, eo);
+        bx = sheared_exact(v1[kx], v1[kz], o[kx], o[kz], dz, sx, eo);
+        by = sheared_exact(v1[ky], v1[kz], o[ky], o[kz], dz, sy, eo);
+        cx = sheared_exact(v2[kx], v2[kz], o[kx], o[kz], dz, sx, eo);
+        cy = sheared_exact(v2[ky], v2[kz], o[ky], o[kz], dz, sy, eo);
+        // One power of two for all six, the largest about 1 (signs unchanged).
+        float sm = max(max(max(abs(ax.x), abs(ay.x)), max(abs(bx.x), abs(by.x))), max(abs(cx.x), abs(cy.x)));
+        int e2 = exponent_of(sm);
+        ax = ff_ldexp(ax, -e2);
+        ay = ff_ldexp(ay, -e2);
+        bx = ff_ldexp(bx, -e2);
+        by = ff_ldexp(by, -e2);
+        cx = ff_ldexp(cx, -e2);
+        cy = ff_ldexp(cy, -e2);
+    }
     // The edge functions times d[kz]^2: u for the edge v1-v2, v for v2-v0, w for v0-v1.
-    double u = diff_of_products(cx, by, cy, bx);
-    double v = diff_of_products(ax, cy, ay, cx);
-    double w = diff_of_products(bx, ay, by, ax);
-    if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return false;
-    precise double det = u + v + w;
-    if (det == 0.0) return false;
-    // t from the plane: ((v0 - o) . n) / (d . n) with n from the edges, which are
-    // exact f32 differences: for a triangle in an axis plane n has two exact
-    // zeros, so an origin on that plane gives t = 0 exactly.
-    precise dvec3 e1 = dvec3(v1) - dvec3(v0);
-    precise dvec3 e2 = dvec3(v2) - dvec3(v0);
-    precise double nx = e1.y * e2.z - e1.z * e2.y;
-    precise double ny = e1.z * e2.x - e1.x * e2.z;
-    precise double nz = e1.x * e2.y - e1.y * e2.x;
-    precise double num = a.x * nx + a.y * ny + a.z * nz;
-    precise double den = d.x * nx + d.y * ny + d.z * nz;
-    if (den == 0.0) return false;
-    precise double t64 = num / den;
-    // Exact against the ray's bounds.
-    if (!(t64 >= double(tmin) && t64 <= double(r.ray_tmax))) return false;
-    precise double t_seg = SEGMENT_FRAME ? t64 - double(r.t_shift) : t64;
+    vec2 u = ff_sub(ff_mul(cx, by), ff_mul(cy, bx));
+    vec2 v = ff_sub(ff_mul(ax, cy), ff_mul(ay, cx));
+    vec2 w = ff_sub(ff_mul(bx, ay), ff_mul(by, ax));
+    if ((u.x < 0.0 || v.x < 0.0 || w.x < 0.0) && (u.x > 0.0 || v.x > 0.0 || w.x > 0.0)) return false;
+    vec2 det = ff_add(ff_add(u, v), w);
+    if (det.x == 0.0) return false;
+    // t from the plane: ((v0 - o) . n) / (d . n) with n from the edges (exact
+    // differences of the vertices, scaled like the offsets): for a triangle in an
+    // axis plane n has two exact zeros, so an origin on that plane gives t = 0
+    // exactly.
+    vec2 e1[3], e2[3];
+    for (uint i = 0u; i < 3u; ++i) {
+        e1[i] = ff_ldexp(ff_diff(v1[i], v0[i]), -es);
+        e2[i] = ff_ldexp(ff_diff(v2[i], v0[i]), -es);
+    }
+    vec2 n[3];
+    n[0] = ff_sub(ff_mul(e1[1], e2[2]), ff_mul(e1[2], e2[1]));
+    n[1] = ff_sub(ff_mul(e1[2], e2[0]), ff_mul(e1[0], e2[2]));
+    n[2] = ff_sub(ff_mul(e1[0], e2[1]), ff_mul(e1[1], e2[0]));
+    vec2 num = ff_add(ff_add(ff_mul(a[0], n[0]), ff_mul(a[1], n[1])), ff_mul(a[2], n[2]));
+    vec2 den = ff_add(ff_add(ff_mul_f(n[0], d.x), ff_mul_f(n[1], d.y)), ff_mul_f(n[2], d.z));
+    if (den.x == 0.0) return false;
+    // The ray's own bounds: tmin <= t_shift + t <= ray_tmax, with t = (num / den)
+    // 2^(es - eq), decided on the signs of num - b den (no rounded quotient: a hit
+    // exactly at a bound, a ray leaving a surface, stays decided exactly).
+    bool above_min = isinf(tmin) ? tmin < 0.0 : ff_quotient_ge(num, den, ff_ldexp(ff_diff(tmin, r.t_shift), eq - es));
+    bool below_max = isinf(r.ray_tmax) ? r.ray_tmax > 0.0
+                                       : ff_quotient_le(num, den, ff_ldexp(ff_diff(r.ray_tmax, r.t_shift), eq - es));
+    if (!(above_min && below_max)) return false;
+    // t along the unscaled direction: t' 2^(es - eq).
+    vec2 t_scaled = ff_div(num, den);
+    vec2 t = ff_ldexp(t_scaled, es - eq);
     err_out = 0.0;
     if (SEGMENT_FRAME && r.t_shift != 0.0) {
-        precise double num_mag = abs(a.x * nx) + abs(a.y * ny) + abs(a.z * nz);
-        precise double den_mag = abs(d.x * nx) + abs(d.y * ny) + abs(d.z * nz);
-        precise double bound = (num_mag + abs(t64) * den_mag) / abs(den) * double(1.0 / 562949953421312.0)  // 2^-49
-                               + abs(t64) * double(1.0 / 1125899906842624.0);                         // 2^-50
-        err_out = float(bound * 1.0000010000000000LF);
+        // The shifted origin's error (EDGE_GAMMA seg_err per axis, scaled by s)
+        // moves t by at most |delta . n| / |den|; the float-float arithmetic adds
+        // about 2^-44 of the terms' magnitudes (bounded by 2^-40).
+        precise float origin_err = ldexp2(EDGE_GAMMA * (r.seg_err.x * abs(n[0].x) + r.seg_err.y * abs(n[1].x) +
+                                                        r.seg_err.z * abs(n[2].x)), -es);
+        precise float num_mag = abs(a[0].x * n[0].x) + abs(a[1].x * n[1].x) + abs(a[2].x * n[2].x);
+        precise float den_mag = abs(d.x * n[0].x) + abs(d.y * n[1].x) + abs(d.z * n[2].x);
+        precise float bound = (origin_err + (num_mag + abs(t_scaled.x) * den_mag) * (1.0 / 1099511627776.0)) *
+                                  (1.0 / abs(den.x)) + abs(t_scaled.x) * (1.0 / 1099511627776.0);  // 2^-40
+        precise float err = ldexp2(bound, es - eq) * 1.0001;
+        err_out = err;
     }
-    t_out = float(t_seg);
-    t64_out = t_seg;
-    precise double bu = v / det;
-    precise double bv = w / det;
-    u_out = float(bu);
-    v_out = float(bv);
+    t_out = t.x;
+    tff_out = t;
+    precise float rcp_det = 1.0 / det.x;
+    precise float bu = v.x * rcp_det;
+    precise float bv = w.x * rcp_det;
+    u_out = bu;
+    v_out = bv;
     return true;
 }
 
@@ -205,12 +272,9 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     if (!ROBUST) {
         // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
         if (u == 0.0 || v == 0.0 || w == 0.0) {
-            precise double du = double(cx) * double(by) - double(cy) * double(bx);
-            precise double dv = double(ax) * double(cy) - double(ay) * double(cx);
-            precise double dw = double(bx) * double(ay) - double(by) * double(ax);
-            u = float(du);
-            v = float(dv);
-            w = float(dw);
+            u = ff_sub(ff_two_prod(cx, by), ff_two_prod(cy, bx)).x;
+            v = ff_sub(ff_two_prod(ax, cy), ff_two_prod(ay, cx)).x;
+            w = ff_sub(ff_two_prod(bx, ay), ff_two_prod(by, ax)).x;
         }
         if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return TRI_MISS;
     } else {

@@ -152,7 +152,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
     bool w_contends = !ANY_HIT && w_ref != NO_REF;
     int first = tie ? 0 : int(first_unsure);
     int j = (tie && in_ref != NO_REF && in_ref != w_ref) ? -2 : (w_contends ? -1 : first);
-    double bar = double(uintBitsToFloat(0x7f800000u));  // f64 t of the closest contender
+    vec2 bar = vec2(uintBitsToFloat(0x7f800000u), 0.0);  // float-float t of the closest contender
     for (; j < int(count) && (j < 0 || tie || unsure > 0u);
          j = j == -2 ? -1 : (j == -1 ? first : j + 1)) {
         uint ref = j == -2 ? in_ref : (j == -1 ? w_ref : offset + uint(j));
@@ -163,21 +163,21 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
         bool unsure_pair = result == TRI_UNSURE;
         if (unsure_pair && j >= 0) unsure -= 1u;
         if (!(unsure_pair || (result == TRI_HIT && (j < 0 || (tie && ref != w_ref))))) continue;
-        float t_f64, u_f64, v_f64, err64;
-        double t64;
-        if (!intersect_triangle_f64(r.wr, v0, v1, v2, r.tmin, t_f64, u_f64, v_f64, t64, err64)) {
+        float t_x, u_x, v_x, err_x;
+        vec2 t_ff;
+        if (!intersect_triangle_exact(r.wr, v0, v1, v2, r.tmin, t_x, u_x, v_x, t_ff, err_x)) {
             if (unsure_pair) continue;
-            t64 = double(t);  // a certain f32 hit the f64 test rejects: keep its f32 t
+            t_ff = vec2(t, 0.0);  // a certain f32 hit the exact test rejects: keep its f32 t
         }
-        // An unsure pair takes the f64 answer; a certain f32 hit keeps its f32 values.
+        // An unsure pair takes the exact answer; a certain f32 hit keeps its f32 values.
         if (unsure_pair) {
-            t = t_f64;
-            u = u_f64;
-            v = v_f64;
-            e = EDGE_GAMMA * abs(t_f64) + err64;
+            t = t_x;
+            u = u_x;
+            v = v_x;
+            e = EDGE_GAMMA * abs(t_x) + err_x;
         }
-        if (t64 <= bar) {
-            bar = t64;
+        if (ff_le(t_ff, bar)) {
+            bar = t_ff;
             best.hit = Hit(t, prim, u, v);
             best.reference = ref;
             best.err = e;

@@ -28,7 +28,8 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                               inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[STACK_SIZE];
-    double stack_seg[STACK_SIZE];
+    float stack_t0[STACK_SIZE];  // entries' segments [t0, t1] (see stack_entry.glsl)
+    float stack_t1[STACK_SIZE];
     uint head = 0u;   // next slot to write
     uint count = 0u;
     uint node = 0u;
@@ -81,8 +82,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                 if (size > 0u) {
                     if (count == size) {
                         // ROBUST: the overwritten entry is lost to its lanes.
-                        float lost_t0, lost_t1;
-                        seg_unpack(stack_seg[head], lost_t0, lost_t1);
+                        float lost_t0 = stack_t0[head], lost_t1 = stack_t1[head];
                         if (alive && lost_t0 <= lost_t1) t_gap = min(t_gap, lost_t0);
                         // The oldest entry is overwritten: its lanes will restart.
                         if (alive) c.drops += 1u;
@@ -91,7 +91,8 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                     }
                     stack_node[head] = second;
                     // A lane that does not need the second child gets the empty [inf, -inf].
-                    stack_seg[head] = needs_second ? seg_pack(second_t0, second_t1) : EMPTY_SEG;
+                    stack_t0[head] = needs_second ? second_t0 : EMPTY_T0;
+                    stack_t1[head] = needs_second ? second_t1 : EMPTY_T1;
                     head = (head + 1u) % size;
                 }
             }
@@ -114,8 +115,7 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                     // Entries still on the stack for this lane are lost to it too.
                     for (uint k = 0u; k < count; ++k) {
                         uint slot = (head + size - 1u - k) % size;
-                        float lost_t0, lost_t1;
-                        seg_unpack(stack_seg[slot], lost_t0, lost_t1);
+                        float lost_t0 = stack_t0[slot], lost_t1 = stack_t1[slot];
                         if (lost_t0 <= lost_t1) t_gap = min(t_gap, lost_t0);
                     }
                     if (!(ANY_HIT && done) && (in_plane || t_gap < best_reach(best))) {
@@ -131,7 +131,8 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
             head = (head + size - 1u) % size;
             count -= 1u;
             node = stack_node[head];
-            seg_unpack(stack_seg[head], t0, t1);
+            t0 = stack_t0[head];
+            t1 = stack_t1[head];
             lane_on = alive && t0 <= t1 && t0 == t_done;
             if (alive && t0 <= t1 && t0 != t_done) t_gap = min(t_gap, t0);
             if (packet_any(lane_on, mask)) break;

@@ -26,7 +26,8 @@ bool lane_wants(bool alive, float t0, float t1, Closest best) {
 bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uvec4 mask = packet_mask();
     uint stack_node[MAX_STACK];
-    double stack_seg[MAX_STACK];
+    float stack_t0[MAX_STACK];  // entries' segments [t0, t1] (see stack_entry.glsl)
+    float stack_t1[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     bool lane_on = alive;
@@ -48,8 +49,8 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closes
                 stack_node[sp] = below_goes_first ? above : below;
                 bool second = below_goes_first ? s.above : s.below;
                 // A lane that does not need the second child gets the empty [inf, -inf].
-                stack_seg[sp] = !second ? EMPTY_SEG
-                              : (below_goes_first ? seg_pack(s.above_t0, s.above_t1) : seg_pack(s.below_t0, s.below_t1));
+                stack_t0[sp] = !second ? EMPTY_T0 : (below_goes_first ? s.above_t0 : s.below_t0);
+                stack_t1[sp] = !second ? EMPTY_T1 : (below_goes_first ? s.above_t1 : s.below_t1);
                 ++sp;
                 node = below_goes_first ? below : above;
                 lane_on = below_goes_first ? s.below : s.above;
@@ -77,7 +78,8 @@ bool trace_packet_stack(bool alive, TraceRay r, float t0, float t1, inout Closes
         while (sp > 0u) {
             --sp;
             node = stack_node[sp];
-            seg_unpack(stack_seg[sp], t0, t1);
+            t0 = stack_t0[sp];
+            t1 = stack_t1[sp];
             lane_on = lane_wants(alive, t0, t1, best);
             if (packet_any(lane_on, mask)) break;
         }

@@ -17,7 +17,8 @@
 bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down, inout Closest best,
                        inout TraceCounters c) {
     uint stack_node[STACK_SIZE];
-    double stack_seg[STACK_SIZE];
+    float stack_t0[STACK_SIZE];  // entries' segments [t0, t1] (see stack_entry.glsl)
+    float stack_t1[STACK_SIZE];
     uvec2 stack_plane[STACK_SIZE];  // the plane each entry's segment ends at
     uint head = 0u;   // next slot to write
     uint count = 0u;
@@ -52,7 +53,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
                 node = stack_node[head];
-                seg_unpack(stack_seg[head], t0, t1);
+                t0 = stack_t0[head];
+                t1 = stack_t1[head];
                 t1_plane = stack_plane[head];
             } else if (ROBUST && k.seeking) {
                 node = seek_step(k, node, n, visit, near, far, ts, t0, t1, best_reach(best));
@@ -78,7 +80,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
                     count += 1u;
                 }
                 stack_node[head] = far;
-                stack_seg[head] = seg_pack(visit == VISIT_BOTH ? ts : t0, t1);
+                stack_t0[head] = visit == VISIT_BOTH ? ts : t0;
+                stack_t1[head] = t1;
                 stack_plane[head] = t1_plane;
                 head = (head + 1u) % STACK_SIZE;
                 if (visit == VISIT_BOTH_SAME) in_plane = true;
@@ -104,7 +107,7 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             if (ANY_HIT) return true;
             // As in stack.glsl: only entries starting before the hit can hold a
             // closer one (the other side of a split plane the ray lies in).
-            while (count > 0u && !(seg_t0(stack_seg[(head + STACK_SIZE - 1u) % STACK_SIZE]) < best_reach(best))) {
+            while (count > 0u && !(stack_t0[(head + STACK_SIZE - 1u) % STACK_SIZE] < best_reach(best))) {
                 head = (head + STACK_SIZE - 1u) % STACK_SIZE;
                 count -= 1u;
             }
@@ -114,7 +117,8 @@ bool trace_short_stack(TraceRay r, float t0, float t1_scene, bool use_push_down,
             head = (head + STACK_SIZE - 1u) % STACK_SIZE;
             count -= 1u;
             node = stack_node[head];
-            seg_unpack(stack_seg[head], t0, t1);
+            t0 = stack_t0[head];
+            t1 = stack_t1[head];
             t1_plane = stack_plane[head];
             continue;
         }

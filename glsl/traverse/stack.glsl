@@ -20,7 +20,8 @@
 // scatter whether or not any lane pushes.
 bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout TraceCounters c) {
     uint stack_node[MAX_STACK];
-    double stack_seg[MAX_STACK];
+    float stack_t0[MAX_STACK];  // entries' segments [t0, t1] (see stack_entry.glsl)
+    float stack_t1[MAX_STACK];
     uint sp = 0u;
     uint node = 0u;
     uint step = 0u;
@@ -36,7 +37,8 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
                 if (sp == 0u) return true;
                 --sp;
                 node = stack_node[sp];
-                seg_unpack(stack_seg[sp], t0, t1);
+                t0 = stack_t0[sp];
+                t1 = stack_t1[sp];
             } else {
                 uint near, far;
                 float ts;
@@ -48,7 +50,8 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
                 } else {
                     // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
                     stack_node[sp] = far;
-                    stack_seg[sp] = seg_pack(visit == VISIT_BOTH ? ts : t0, t1);
+                    stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
+                    stack_t1[sp] = t1;
                     ++sp;
                     node = near;
                     if (visit == VISIT_BOTH) t1 = ts;
@@ -65,9 +68,9 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
             // A closer hit can only lie in an entry that starts before this one: the
             // other side of a split plane the ray lies in (VISIT_BOTH_SAME) has the
             // same segment as the leaf just done. Drop the entries behind the hit.
-            if (sp > 0u && !(seg_t0(stack_seg[sp - 1u]) < best_reach(best))) do {
+            if (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best))) do {
                 --sp;
-            } while (sp > 0u && !(seg_t0(stack_seg[sp - 1u]) < best_reach(best)));
+            } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
         }
         // A second pop site, on purpose: leaving visited leaves through the
         // descent's pop (one site) costs more instructions on SIMD drivers, as every
@@ -75,7 +78,8 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
         if (sp == 0u) return true;
         --sp;
         node = stack_node[sp];
-        seg_unpack(stack_seg[sp], t0, t1);
+        t0 = stack_t0[sp];
+                t1 = stack_t1[sp];
     }
     return false;
 }

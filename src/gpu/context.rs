@@ -120,9 +120,9 @@ struct Debug {
 /// them and never creates an instance or a device of its own.
 ///
 /// The device must have been created with the features of [`required_features`]
-/// (today `shaderFloat64`, for the exact fallback of the watertight triangle
-/// test) from an instance created with `apiVersion` 1.2 or later (the kernels are
-/// SPIR-V 1.5), and `queue_family` must support compute.
+/// (today none: the kernels use no 64-bit type, so neither `shaderFloat64` nor
+/// `shaderInt64` is needed) from an instance created with `apiVersion` 1.2 or
+/// later (the kernels are SPIR-V 1.5), and `queue_family` must support compute.
 pub struct AdoptDesc {
     /// The instance `physical_device` belongs to.
     pub instance: ash::Instance,
@@ -173,11 +173,15 @@ impl std::fmt::Debug for AdoptDesc {
     }
 }
 
-/// The core device features kdtrace's kernels need: `shaderFloat64` (the exact
-/// fallback of the watertight triangle test, Woop, Benthin & Wald 2013). Enable at
-/// least these when you create a device for [`GpuContext::adopt`].
+/// The core device features kdtrace's kernels need: none. The exact fallback of
+/// the watertight triangle test (Woop, Benthin & Wald 2013) runs in float-float
+/// arithmetic on f32 (`glsl/shared/ff.glsl`), and no kernel declares the
+/// `Float64` or `Int64` capability (a test reads every SPIR-V module), so
+/// devices without `shaderFloat64` or `shaderInt64` (MoltenVK, many mobile and
+/// integrated GPUs) run every kernel. Kept as a function so that an engine can
+/// OR it into the features it enables, should a later version need one.
 pub fn required_features() -> vk::PhysicalDeviceFeatures {
-    vk::PhysicalDeviceFeatures::default().shader_float64(true)
+    vk::PhysicalDeviceFeatures::default()
 }
 
 /// The device extensions of the ray-query backend: acceleration structures, ray
@@ -373,18 +377,7 @@ impl GpuContext {
             Ok(p) => p,
             Err(e) => return Err((e, debug)),
         };
-        // SAFETY: `physical_device` came from this instance.
-        let features = unsafe { instance.get_physical_device_features(physical_device) };
-        if features.shader_float64 == vk::FALSE {
-            return Err((
-                Error::DeviceLimit(format!(
-                    "{} lacks shaderFloat64, which the watertight test's exact fallback needs",
-                    info.name
-                )),
-                debug,
-            ));
-        }
-        let enabled = required_features().shader_int64(features.shader_int64 != 0);
+        let enabled = required_features();
         let mut features13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(info.subgroup_size_control)
             .compute_full_subgroups(info.subgroup_size_control);
@@ -525,21 +518,9 @@ impl GpuContext {
                 )))
             }
         }
-        // SAFETY: as above.
-        let supported = unsafe { instance.get_physical_device_features(physical_device) };
-        if supported.shader_float64 == vk::FALSE {
-            return Err(Error::DeviceLimit(format!(
-                "{} lacks shaderFloat64, which the watertight test's exact fallback needs",
-                info.name
-            )));
-        }
-        if enabled_features.shader_float64 == vk::FALSE {
-            return Err(Error::DeviceLimit(format!(
-                "shaderFloat64 was not enabled on the adopted device ({}); the watertight test's exact \
-                 fallback needs it: enable kdtrace::gpu::required_features() when creating the device",
-                info.name
-            )));
-        }
+        // No core feature is required today (required_features); enabled_features
+        // stays in AdoptDesc so that a later requirement can be checked here.
+        let _ = enabled_features;
         if ray_query && !info.ray_query_missing.is_empty() {
             return Err(Error::DeviceLimit(format!(
                 "AdoptDesc::ray_query is set, but {} lacks {}",

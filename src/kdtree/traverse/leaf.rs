@@ -6,6 +6,7 @@ use super::node::Counters;
 use super::segment::TraceRay;
 use super::{SceneRef, State};
 use crate::consts::PRIM_MISS;
+use crate::ff::Ff;
 use crate::geom::{Hit, TriTest, EDGE_GAMMA};
 use crate::kdtree::KdNode;
 
@@ -14,7 +15,7 @@ use crate::kdtree::KdNode;
 /// `hit` is in the segment frame (`t` = the segment frame's `tmax` and
 /// [`PRIM_MISS`] for none); `reference` is its index of `prim_indices` ([`NO_REF`]
 /// for none) and `err` a bound on the error of its `t`: [`intersect_leaf`]
-/// orders hits within each other's bounds in f64.
+/// orders hits within each other's bounds in float-float.
 #[derive(Clone, Copy)]
 pub(super) struct Closest {
     pub(super) hit: Hit,
@@ -60,9 +61,9 @@ pub(super) fn starts_before(t0: f32, best_t: f32) -> bool {
 }
 
 /// Twin of `intersect_leaf` in leaf.glsl. Any-hit mode stops at the first hit.
-/// The f32 tests first, then a second pass in f64 over the pairs they left
+/// The f32 tests first, then a second pass in float-float over the pairs they left
 /// unsure and, when robust, over depth ties: hits whose f32 `t` lie within
-/// rounding of the closest one's, ordered by their f64 `t` (see leaf.glsl).
+/// rounding of the closest one's, ordered by their float-float `t` (see leaf.glsl).
 pub(super) fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &mut Closest, c: &mut Counters) {
     let offset = n.prim_offset() as usize;
     let count = n.prim_count() as usize;
@@ -78,7 +79,7 @@ pub(super) fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &m
         let (prim, [v0, v1, v2]) = triangle((offset + i) as u32);
         match r.wr.intersect_f32(v0, v1, v2, r.tmin - r.wr.t_shift, best.hit.t + best.err) {
             TriTest::Hit(t, u, v, e) => {
-                // [t - e, t + e] meets the closest hit's interval: order them in f64
+                // [t - e, t + e] meets the closest hit's interval: order them in float-float
                 // (unless it is the same triangle, met again in another leaf).
                 if r.wr.robust
                     && !r.any_hit
@@ -116,7 +117,7 @@ pub(super) fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &m
         (!r.any_hit && w_ref != NO_REF).then_some(w_ref),
     ];
     let first = if tie { 0 } else { first_unsure };
-    let mut bar = f64::INFINITY;
+    let mut bar = Ff::from_f32(f32::INFINITY);
     let leaf = (first..count).map(|i| ((offset + i) as u32, true));
     // (reference, whether it is one of the leaf's triangles)
     for (reference, in_leaf) in before.into_iter().flatten().map(|r| (r, false)).chain(leaf) {
@@ -134,19 +135,19 @@ pub(super) fn intersect_leaf(scene: &SceneRef, r: &TraceRay, n: KdNode, best: &m
             TriTest::Unsure => (Hit { t: f32::NAN, prim_id: prim, u: 0.0, v: 0.0 }, 0.0),
             _ => continue,
         };
-        let t64 = match r.wr.intersect_f64(v0, v1, v2, r.tmin) {
-            Some((t, u, v, t64, err64)) => {
-                // An unsure pair takes the f64 answer; a certain f32 hit keeps its f32 values.
+        let t_ff = match r.wr.intersect_exact(v0, v1, v2, r.tmin) {
+            Some((t, u, v, t_ff, err)) => {
+                // An unsure pair takes the exact answer; a certain f32 hit keeps its f32 values.
                 if unsure_pair {
-                    (hit, e) = (Hit { t, prim_id: prim, u, v }, EDGE_GAMMA * t.abs() + err64);
+                    (hit, e) = (Hit { t, prim_id: prim, u, v }, EDGE_GAMMA * t.abs() + err);
                 }
-                t64
+                t_ff
             }
             None if unsure_pair => continue,
-            None => hit.t as f64, // a certain f32 hit the f64 test rejects: keep its f32 t
+            None => Ff::from_f32(hit.t), // a certain f32 hit the exact test rejects: keep its f32 t
         };
-        if t64 <= bar {
-            bar = t64;
+        if t_ff.le(bar) {
+            bar = t_ff;
             *best = Closest { hit, reference, err: e };
             if r.any_hit {
                 return;

@@ -24,7 +24,8 @@ use glam::Vec3;
 use super::links::TreeLinks;
 use super::KdNode;
 use crate::consts::{MAX_SHORT_STACK, PRIM_INCOMPLETE, PRIM_INVALID, PRIM_MISS};
-use crate::geom::{Aabb, Hit, Ray, WatertightRay};
+use crate::ff::{exact_sum8, two_prod, Ff};
+use crate::geom::{exponent_of, ff_ldexp, ldexp2, Aabb, Hit, Ray, WatertightRay};
 use decide::T_EPS;
 use leaf::Closest;
 use segment::{clip_to_box, glsl_max, TraceRay};
@@ -89,7 +90,7 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
         let mut clipped = clip_to_box(&r, &scene.bounds);
         if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
             if is_far(&r, &scene.bounds, t0) {
-                clipped = shift_to_scene(&mut r, &scene.bounds, t0, t1);
+                clipped = shift_to_scene(&mut r, &scene.bounds, t1);
                 best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
             }
         }
@@ -111,9 +112,9 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
                 best.prim_id = PRIM_INCOMPLETE;
             }
         }
-        // Back to the ray's own parameter (one rounding, in f64).
+        // Back to the ray's own parameter (one rounding: an f32 sum is correctly rounded).
         if r.wr.t_shift != 0.0 {
-            best.t = (best.t as f64 + r.wr.t_shift as f64) as f32;
+            best.t += r.wr.t_shift;
         }
     }
     if best.prim_id >= PRIM_INCOMPLETE {
@@ -144,40 +145,55 @@ fn is_far(r: &TraceRay, b: &Aabb, t0: f32) -> bool {
 }
 
 /// Twin of `shift_to_scene` in trace.comp: a far ray ([`is_far`]) is traversed
-/// from its entry `t0` into the box, with the bound `t_err` and its flat axes;
-/// returns the clip there (None: it misses after all). `t0`, `t1`: the clip in
-/// the ray's own frame.
-fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t0: f32, t1: f32) -> Option<(f32, f32)> {
-    let t_shift = t0 as f64;
-    let mut hi = Vec3::ZERO;
-    let mut lo = Vec3::ZERO;
-    let mut seg_err = Vec3::ZERO;
-    let mut e = 0.0f64;
+/// from its point at `t_shift`, just before the box on its dominant axis,
+/// summed exactly and rounded once (see trace.comp), with the
+/// bound `t_err` and its flat axes; returns the clip there (None: it misses
+/// after all). `t1`: the clip's end in the ray's own frame.
+fn shift_to_scene(r: &mut TraceRay, b: &Aabb, t1: f32) -> Option<(f32, f32)> {
+    let k = r.wr.kz;
+    let (o, d) = (r.wr.origin, r.dir);
+    // A plane a little before the near face (see trace.comp).
+    let margin = (b.max[k] - b.min[k]) * (1.0 / 128.0)
+        + b.min[k].abs() * 2f32.powi(-20)
+        + b.max[k].abs() * 2f32.powi(-20)
+        + f32::MIN_POSITIVE;
+    let c = if d[k] > 0.0 { b.min[k] - margin } else { b.max[k] + margin };
+    // Scaled inputs: d[k] in [1, 2), the origin and c below 2^100.
+    let eq = exponent_of(d[k].abs());
+    let om = glsl_max(glsl_max(o.x.abs(), o.y.abs()), glsl_max(o.z.abs(), c.abs()));
+    let eo = (exponent_of(om) - 99).max(0);
+    let ds = [0, 1, 2].map(|i| ldexp2(d[i], -eq));
+    let os = [0, 1, 2].map(|i| ldexp2(o[i], -eo));
+    let cs = ldexp2(c, -eo);
+    // The frame's origin: o + t_shift·d summed exactly, rounded once (see trace.comp).
+    let t_shift = ldexp2(Ff::diff(cs, os[k]).div(Ff::from_f32(ds[k])).hi, eo - eq);
+    let ts = ldexp2(t_shift, eq - eo);
+    let (mut hi, mut lo, mut a) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+    for j in 0..3 {
+        let step = two_prod(ts, ds[j]);
+        let p = ff_ldexp(exact_sum8([os[j], step.hi, step.lo, 0.0, 0.0, 0.0, 0.0, 0.0]), eo);
+        (hi[j], lo[j]) = (p.hi, p.lo);
+        a[j] = (p.hi.abs() * 2f32.powi(-45)) + ldexp2(1.0, eo - 120);
+    }
     // Flat axes: see trace.comp.
-    let s_max = (t1 as f64 - t0 as f64) + (t1.abs() as f64) * 2f64.powi(-20);
+    let s_max = (t1 - t_shift) + t1.abs() * 2f32.powi(-20);
+    let mut e = 0.0f32;
     for axis in 0..3 {
-        let (o, d) = (r.wr.origin[axis] as f64, r.dir[axis] as f64);
-        let p = o + t_shift * d;
-        hi[axis] = p as f32;
-        let rest = p - hi[axis] as f64;
-        lo[axis] = rest as f32;
-        let a = (hi[axis] as f64).abs() * 2f64.powi(-45) + (o.abs() + (t_shift * d).abs()) * 2f64.powi(-50);
-        seg_err[axis] = (rest.abs() + a * 2f64.powi(20)) as f32;
         if r.dir[axis] == 0.0 {
             continue;
         }
-        if a > T_EPS as f64 * s_max * d.abs() {
+        if a[axis] > T_EPS * s_max * d[axis].abs() {
             r.flat_axes |= 1 << axis;
-            r.band[axis] = ((a + d.abs() * s_max) * 1.000001) as f32;
+            r.band[axis] = (a[axis] + d[axis].abs() * s_max) * 1.000001;
         } else {
-            e = e.max(a / d.abs());
+            e = glsl_max(e, a[axis] * (1.0 / d[axis].abs()));
         }
     }
-    r.t_err = ((e * 1.000001) as f32).max(f32::MIN_POSITIVE);
+    r.t_err = glsl_max(e * 1.000001, f32::MIN_POSITIVE);
     r.wr.seg_origin = hi;
     r.wr.seg_lo = lo;
-    r.wr.seg_err = seg_err;
-    r.wr.t_shift = t0;
-    r.wr.seg_tmax = r.tmax - t0;
+    r.wr.seg_err = lo.abs() + a * 1_048_576.0;
+    r.wr.t_shift = t_shift;
+    r.wr.seg_tmax = r.tmax - t_shift;
     clip_to_box(r, b)
 }
