@@ -24,7 +24,7 @@ layout(constant_id = TRACE_SPEC_COUNTERS) const bool COUNTERS = false;
 layout(constant_id = TRACE_SPEC_STACK_SIZE) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
 layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)
 layout(constant_id = TRACE_SPEC_PACKET_WIDTH) const uint PACKET_WIDTH = 1u; // lanes per packet; 1 = single rays
-layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;     // conservative decisions, f64 fallback near edges
+layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;     // conservative decisions, exact fallback near edges
 layout(constant_id = TRACE_SPEC_PASS) const uint PASS = PASS_ONE;   // PASS_FAST / PASS_CAREFUL: robust single rays (see main)
 
 // Far rays move to the scene box (shift_to_scene below) in the kernels that
@@ -168,6 +168,15 @@ bool shift_to_scene(inout TraceRay r, inout float t0, inout float t1) {
     return clip_to_box(r, bmin, bmax, t0, t1);
 }
 
+// The next float above x (FLT_MIN above a zero; infinities and NaN unchanged).
+// CPU twin: next_up in src/kdtree/traverse/mod.rs.
+float next_up(float x) {
+    if (isinf(x) || isnan(x)) return x;
+    if (x == 0.0) return FLT_MIN_NORMAL;
+    uint bits = floatBitsToUint(x);
+    return uintBitsToFloat(x > 0.0 ? bits + 1u : bits - 1u);
+}
+
 // True when the box entry t0 lies more than SHIFT_DIAGONALS scene diagonals
 // along the ray (squared lengths: no sqrt, whose rounding GPUs do not fix).
 bool is_far(TraceRay r, float t0) {
@@ -244,6 +253,14 @@ void trace_ray(uint index) {
         alive = shift_to_scene(r, t0, t1);
         precise float best_seg = ray.tmax - r.wr.t_shift;
         best.hit.t = best_seg;  // the segment frame, like every hit below
+    }
+    // A closed segment: the robust mode keeps a cell that starts exactly where the
+    // segment ends (a triangle lying in the plane through which the ray reaches
+    // tmax or leaves the box): the segment and the no-hit bound end one float
+    // later, and the triangle tests still check the ray's own tmax exactly.
+    if (ROBUST && alive) {
+        t1 = next_up(t1);
+        best.hit.t = next_up(best.hit.t);
     }
     // The fast pass leaves far rays to the careful one (without tracing them).
     bool skip = PASS == PASS_FAST && far;

@@ -13,7 +13,7 @@ pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
 /// `2^-EDGE_GAMMA_LOG2` times its magnitude before the shear cancelled (32
 /// roundings of 2^-24, about 6 times the worst case of 5) and carries that
 /// through the edge functions' products (`edge_error` in triangle.glsl); an edge
-/// function within its bound is redone in f64.
+/// function within its bound is redone exactly (float-float).
 pub const EDGE_GAMMA_LOG2: u32 = 19;
 /// The traversals' split decisions and early exits are widened by
 /// `2^-TRAVERSAL_EPS_LOG2` relative (about 8 f32 ulps, more than the rounding of
@@ -54,7 +54,7 @@ pub const TRACE_SPEC_STACK_SIZE: u32 = 2;
 pub const TRACE_SPEC_ANY_HIT: u32 = 3;
 /// Lanes per packet; 1 = single rays.
 pub const TRACE_SPEC_PACKET_WIDTH: u32 = 4;
-/// Conservative decisions and the f64 fallback near edges (`bool`).
+/// Conservative decisions and the exact fallback near edges (`bool`).
 pub const TRACE_SPEC_ROBUST: u32 = 5;
 /// The pass (`PASS_*`).
 pub const TRACE_SPEC_PASS: u32 = 6;

@@ -59,6 +59,15 @@ pub enum Category {
     /// From 1e5 scene diagonals away toward points on triangles, nearly parallel
     /// to an axis plane: one direction component 1e-3 … 1e-30 of the others.
     FarGrazing,
+    /// Origins 1e10 … 1e30 scene diagonals away (a power of ten drawn per ray,
+    /// at most 1e36 from the box: every `t` stays finite), aimed at points on
+    /// triangles along directions within a few scene diagonals over the distance of
+    /// an axis (an f32 direction of any other kind cannot be aimed from that far).
+    FarOrigin1e30,
+    /// Exactly axis-parallel rays through points on triangles (the other
+    /// direction components ±0.0) from 1e3 … 1e30 scene diagonals away along
+    /// the axis (as for `FarOrigin1e30`).
+    FarAxisParallel,
     /// Bounded segments toward a point on a triangle (reached at t ≈ 1): `tmax` a
     /// few ulps before, at or after 1 (some with `tmin` > 0 too), `tmin` a few
     /// ulps around 1 with `tmax` = +inf, and shadow-ray segments between two
@@ -68,7 +77,7 @@ pub enum Category {
 
 impl Category {
     /// Every category, in table order.
-    pub const ALL: [Category; 17] = [
+    pub const ALL: [Category; 19] = [
         Category::Random,
         Category::AxisParallel,
         Category::SplitPlaneOrigin,
@@ -82,6 +91,8 @@ impl Category {
         Category::FarOrigin1e3,
         Category::FarOrigin,
         Category::FarOrigin1e7,
+        Category::FarOrigin1e30,
+        Category::FarAxisParallel,
         Category::HugeTmax,
         Category::FarGrazing,
         Category::BoundedSegment,
@@ -104,6 +115,8 @@ impl Category {
             Category::FarOrigin1e3 => "far origin 1e3",
             Category::FarOrigin => "far origin 1e5",
             Category::FarOrigin1e7 => "far origin 1e7",
+            Category::FarOrigin1e30 => "far origin 1e10-1e30",
+            Category::FarAxisParallel => "far axis-parallel 1e3-1e30",
             Category::HugeTmax => "huge tmax",
             Category::FarGrazing => "far, nearly axis-parallel",
             Category::BoundedSegment => "bounded segment",
@@ -125,6 +138,13 @@ struct Source<'a> {
 impl Source<'_> {
     fn index(&mut self, n: usize) -> usize {
         (self.rng.next_u64() % n as u64) as usize
+    }
+
+    /// 10^k scene diagonals for k drawn from `lowest` to 30, at most 1e36 (so that
+    /// an origin that far and every `t` to the box stay finite in f32).
+    fn far_distance(&mut self, lowest: i32, diagonal: f32) -> f32 {
+        let k = lowest + self.index((31 - lowest) as usize) as i32;
+        (10f64.powi(k) * diagonal as f64).min(1e36) as f32
     }
 
     fn triangle(&mut self) -> [Vec3; 3] {
@@ -293,6 +313,36 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                 };
                 let origin = bounds.center() + s.rng.unit_vector() * (distance * diagonal);
                 toward(origin, s.surface_point())
+            }
+            Category::FarOrigin1e30 => {
+                // An f32 direction holds 24 bits, so a generic one cannot aim at the
+                // scene from this far (its rounding alone moves the ray by about 1e-7
+                // of the distance). These run off an axis by an angle of about a few
+                // scene diagonals over the distance, and reach the target within
+                // rounding of the scene's size: the dominant axis exactly, the others
+                // offset from the target by scene-sized amounts.
+                let target = s.surface_point().as_dvec3();
+                let distance = s.far_distance(10, diagonal) as f64;
+                let axis = s.index(3);
+                let mut u = glam::DVec3::ZERO;
+                u[axis] = s.sign() as f64;
+                for other in [(axis + 1) % 3, (axis + 2) % 3] {
+                    u[other] = (2.0 * s.rng.next_f32() as f64 - 1.0) * 2.0 * diagonal as f64 / distance;
+                }
+                Ray::new((target - u * distance).as_vec3(), u.as_vec3(), 0.0, f32::INFINITY)
+            }
+            Category::FarAxisParallel => {
+                let target = s.surface_point();
+                let axis = s.index(3);
+                let sign = s.sign();
+                let mut origin = target;
+                origin[axis] -= sign * s.far_distance(3, diagonal);
+                let mut dir = Vec3::ZERO;
+                dir[axis] = sign;
+                for other in [(axis + 1) % 3, (axis + 2) % 3] {
+                    dir[other] = if s.rng.next_u64() & 1 == 0 { 0.0 } else { -0.0 };
+                }
+                Ray::new(origin, dir, 0.0, f32::INFINITY)
             }
             Category::HugeTmax => {
                 let origin = match s.rng.next_u64() & 1 {

@@ -115,9 +115,9 @@ pub struct Traversal {
     /// A required subgroup size (`VK_EXT_subgroup_size_control`); `None` = the device's.
     pub subgroup_size: Option<u32>,
     /// The robustness measures (default on): conservative split decisions
-    /// (Ize 2013 in spirit), and the watertight test's f64 fallback whenever an
+    /// (Ize 2013 in spirit), and the watertight test's exact fallback whenever an
     /// edge function or the hit's distance to the ray's bounds lies within its
-    /// rounding error. Off: plain f32 decisions and the f64 recompute only at an
+    /// rounding error. Off: plain f32 decisions and the exact recompute only at an
     /// edge function of exactly 0 (Woop, Benthin & Wald 2013) — to measure what
     /// the measures cost. A specialization constant: no cost when off.
     ///

@@ -36,11 +36,13 @@ const EASY_FLOOR: f64 = 0.995;
 /// Lowest agreement over all hard-ray categories of a scene (the stress rays of
 /// `kdtrace verify`: through vertices and edges, inside planes, from surfaces
 /// and from far away), 100 rays per category. Measured on lavapipe (Mesa
-/// 25.0.7): 77.8 % on the Cornell box (whose axis-aligned walls put many rays in
-/// their planes and on their edges), 84.5 % on q3_20kdm2, 89.6 % on the teapot;
-/// docs/ACCURACY.md has the table per category. The driver's triangle test is
-/// not watertight and does not report hits at `t = tmin` exactly.
-const HARD_FLOOR: f64 = 0.75;
+/// 25.0.7) with the 19 categories of 2026-12-04 (the far ones from 1e10–1e30
+/// diagonals: 24–58 % there): 74.6 % on the Cornell box (whose axis-aligned
+/// walls put many rays in their planes and on their edges), 79.3 % on
+/// q3_20kdm2, 85.3 % on the teapot (with the 17 earlier categories: 77.8, 84.5,
+/// 89.6 %; docs/ACCURACY.md has that table per category). The driver's triangle
+/// test is not watertight and does not report hits at `t = tmin` exactly.
+const HARD_FLOOR: f64 = 0.72;
 
 /// True when a missing ray query may skip a test: outside CI, or under CI with
 /// `KDTRACE_SYSTEM_MESA=1` (the machine keeps a Mesa without ray query on purpose).
@@ -179,6 +181,7 @@ fn camera_and_random_rays_agree_with_the_exact_reference_on_every_scene() {
 fn hard_rays_all_finish_and_meet_the_measured_floor() {
     let Some(ctx) = ray_query_context() else { return };
     let mut rows = Vec::new();
+    let mut low = Vec::new();
     for name in ["cornell_box.obj", "teapot.obj", "q3_20kdm2.obj"] {
         let scene = Scene::load(&scene_path(name)).unwrap();
         let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
@@ -199,10 +202,13 @@ fn hard_rays_all_finish_and_meet_the_measured_floor() {
             }
             rows.push((format!("{name} {}", category.name()), tally));
         }
-        assert!(all.agreement() >= HARD_FLOOR, "{name}: {:.2}% < {HARD_FLOOR}", 100.0 * all.agreement());
+        if all.agreement() < HARD_FLOOR {
+            low.push(format!("{name}: {:.2}% < {HARD_FLOOR}", 100.0 * all.agreement()));
+        }
         rows.push((format!("**{name} all**"), all));
     }
     print_table("ray query, hard rays, against the exact reference", &rows);
+    assert!(low.is_empty(), "{low:?}");
     assert_validation_clean(&ctx);
 }
 

@@ -233,7 +233,8 @@ fn stress_shared_scenes() {
 }
 
 /// Deep trees of big meshes and far rays (issue 17): every category, the far
-/// origins at 1e3, 1e5 and 1e7 scene diagonals and huge finite `tmax` included,
+/// origins at 1e3, 1e5, 1e7 and 1e10–1e30 scene diagonals (axis-parallel from
+/// 1e3–1e30) and huge finite `tmax` included,
 /// on the shared meshes with the deepest trees, sampled (the exact reference is
 /// brute force), through every variant and packet kernel on the GPU, closest
 /// hit and any-hit. Asserted: no incomplete ray, no serious error, agreement of
@@ -304,6 +305,8 @@ fn stress_rays_gpu_equals_cpu_twin() {
         Category::FarOrigin1e3,
         Category::FarOrigin,
         Category::FarOrigin1e7,
+        Category::FarOrigin1e30,
+        Category::FarAxisParallel,
         Category::HugeTmax,
         Category::FarGrazing,
         Category::BoundedSegment,
@@ -452,7 +455,9 @@ fn closed_meshes_have_no_holes() {
 /// origin 96.5, vertex-coord origin 95.5, to vertex 85.0, to edge 89.5, along
 /// edge 90.0, in triangle plane 98.0, on surface 83.0, far 1e3 99.0, far 1e5
 /// 63.5, far 1e7 11.5, huge tmax 87.5, far nearly axis-parallel 70.5, bounded
-/// segment 90.5.
+/// segment 90.5; and (2026-12-04, seed 13 only) far 1e10–1e30 3.5 (`restart`
+/// packets of 4 on the teapot; single-ray `stack` 62 on the Cornell box), far
+/// axis-parallel 1e3–1e30 13.0.
 fn plain_floor(category: Category) -> f64 {
     match category {
         Category::Random | Category::DirectionScale => 0.995,
@@ -470,6 +475,8 @@ fn plain_floor(category: Category) -> f64 {
         Category::FarOrigin => 0.535,
         Category::FarGrazing => 0.605,
         Category::FarOrigin1e7 => 0.015,
+        Category::FarOrigin1e30 => 0.0,
+        Category::FarAxisParallel => 0.03,
     }
 }
 

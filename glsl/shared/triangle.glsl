@@ -1,5 +1,6 @@
 // Watertight ray/triangle test (Woop, Benthin & Wald 2013, JCGT 2(1)) with an
-// f64 fallback near edges. The CPU twin is `WatertightRay` in src/geom.rs: same
+// exact fallback near edges (float-float arithmetic on f32, ff.glsl: no kernel
+// uses a 64-bit type). The CPU twin is `WatertightRay` in src/geom.rs: same
 // operations in the same order, so both give the same bits. `precise` forbids the
 // compiler from fusing into FMAs.
 //
@@ -9,17 +10,18 @@
 // Each edge function gets an error bound (the sheared coordinates' errors,
 // EDGE_GAMMA times their magnitudes before cancellation, carried through its two
 // products, with a margin of about 6); when any edge function
-// lies within its bound, the whole test is redone in f64 on the f32 inputs, whose
-// signs are those of the exact edge functions unless the ray passes within about
-// 2^-50 of the edge. Watertightness is kept: a shared edge's f32 sign outside its
+// lies within its bound, the whole test is redone exactly on the f32 inputs
+// (intersect_triangle_exact: each sheared coordinate an exact expansion rounded
+// once to 48 bits), whose signs are those of the exact edge functions unless the
+// ray passes within about 2^-46 of the edge. Watertightness is kept: a shared edge's f32 sign outside its
 // bound is the exact sign, both forms negate exactly when the edge is reversed,
-// and the f64 form is an exact 2D orientation test of shared 2D vertices.
+// and the exact form is a 2D orientation test of shared 2D vertices.
 #ifndef TRIANGLE_GLSL
 #define TRIANGLE_GLSL
 
 #include "ff.glsl"
 
-// The f64 test works from `origin`, in the ray's own parameter. The f32 test
+// The exact test works from `origin`, in the ray's own parameter. The f32 test
 // works in the segment frame (TraceRay in traverse/segment.glsl): from the point
 // seg_origin + seg_lo = origin + t_shift * dir (a far ray moved to the scene
 // box), answering t - t_shift; seg_err bounds, per axis and divided by
@@ -232,13 +234,13 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
 }
 
 // The includer declares the specialization constant ROBUST (trace.comp): false
-// gives the plain test, with the f64 recompute only at an edge function of 0.
+// gives the plain test, with the exact recompute only at an edge function of 0.
 //
 // The f32 test: TRI_HIT with (t, u, v) when the ray hits the triangle at
 // tmin <= t <= tmax, TRI_MISS, or TRI_UNSURE when rounding could decide it (an
 // edge function or the distance to the ray's bounds within its error bound):
-// then intersect_triangle_f64 decides. Whether a pair is unsure does not depend
-// on tmax (the closest hit so far), so callers may defer the f64 tests.
+// then intersect_triangle_exact decides. Whether a pair is unsure does not depend
+// on tmax (the closest hit so far), so callers may defer the exact tests.
 // `tmin` must be the ray's own; the decision near the ray's end uses `r.ray_tmax`.
 // Edges and vertices are hits; a ray in the triangle's plane misses.
 //
@@ -246,7 +248,7 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
 // through t = sum(u_i z_i) / sum(u_i), plus t's own rounding), and a hit whose
 // interval [t - e, t] reaches tmax counts (t <= ray_tmax still holds): far from
 // the origin two surfaces a few ulps of t apart cannot be ordered in f32, and
-// the caller orders such pairs in f64. Without ROBUST, `e_out` is 0.
+// the caller orders such pairs by their float-float t. Without ROBUST, `e_out` is 0.
 #define TRI_MISS 0u
 #define TRI_HIT 1u
 #define TRI_UNSURE 2u
@@ -270,7 +272,7 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     precise float w = bx * ay - by * ax;
     precise float eu = 0.0, ev = 0.0, ew = 0.0;  // the edge functions' error bounds (ROBUST)
     if (!ROBUST) {
-        // Plain Woop, Benthin & Wald: recompute in f64 only at an edge function of 0.
+        // Plain Woop, Benthin & Wald: recompute exactly only at an edge function of 0.
         if (u == 0.0 || v == 0.0 || w == 0.0) {
             u = ff_sub(ff_two_prod(cx, by), ff_two_prod(cy, bx)).x;
             v = ff_sub(ff_two_prod(ax, cy), ff_two_prod(ay, cx)).x;
@@ -314,7 +316,7 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         bool negative = u < -eu || v < -ev || w < -ew;
         bool positive = u > eu || v > ev || w > ew;
         if (negative && positive) return TRI_MISS;
-        // Any sign in doubt: decide in f64.
+        // Any sign in doubt: decide exactly.
         if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew)) return TRI_UNSURE;
     }
     precise float det = u + v + w;
@@ -336,7 +338,7 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         precise float spread = max(max(az, bz), cz) - min(min(az, bz), cz);
         e = (t_err + weights_err * spread + EDGE_GAMMA * abs(t_scaled)) / abs(det) + EDGE_GAMMA * abs(t);
         // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
-        // surface, a shadow ray ending on a vertex): decide in f64 which side of the
+        // surface, a shadow ray ending on a vertex): decide exactly which side of the
         // bound it lies on. |t - b| is exact near b (Sterbenz) and far from it it
         // exceeds e by far, so the f32 difference decides soundly.
         bool near_tmin = !isinf(tmin) && abs(t - tmin) <= e;

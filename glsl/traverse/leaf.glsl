@@ -27,13 +27,13 @@ uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
 }
 
 // Robust single rays are traced in two passes (trace.comp, src/trace.rs): a fast
-// pass whose leaves skip the f64 pass below and only note that a pair needed it
+// pass whose leaves skip the exact pass below and only note that a pair needed it
 // (and whose `backtrack` and `ropes` note where they would fall back to exact
 // restarts), then, in a second dispatch over the rays so noted, a careful trace
 // from scratch. Packets and the plain kernels trace once (careful_pass true).
 // The split exists because lavapipe runs every branch and loop of a kernel under
 // a mask whether or not a lane enters it, so code a kernel holds costs in every
-// subgroup: the leaf's f64 pass, needed in few leaves, and a careful copy of the
+// subgroup: the leaf's exact pass, needed in few leaves, and a careful copy of the
 // traversal each cost every ray a large share of its instructions when held by
 // the fast kernel (see docs/BENCH.md, "Where the instructions go"). The careful
 // trace decides everything the fast one decided the same way, so hits and
@@ -48,7 +48,7 @@ const bool careful_pass = PASS != PASS_FAST;
 // segment frame's tmax and PRIM_MISS for none); `reference` is its triangle
 // reference (an index of tri_texels; NO_REF for none) and `err` a bound on
 // |hit.t - its exact t|: intersect_leaf orders hits within each other's bounds
-// in f64. `needs_careful`: the fast pass met what it leaves to the careful pass
+// by float-float t. `needs_careful`: the fast pass met what it leaves to the careful pass
 // (see careful_pass), so this trace's answer is not written. The member order
 // matters to the compiler only (it orders the loops' phis): this one keeps the
 // kernels' instruction counts closest to those of per-invocation globals, which
@@ -81,13 +81,13 @@ float best_reach(Closest best) {
 // short (see trace.comp).
 //
 // The f32 tests come first. Two kinds of pairs they cannot decide go to a
-// second pass in f64, in a loop of its own, which only the careful pass holds
+// second pass exactly, in a loop of its own, which only the careful pass holds
 // (lavapipe runs even a loop no lane enters under a mask, so in the fast pass
 // the leaf only notes that the ray needs the careful pass):
 // - unsure pairs (an edge function or a ray bound within rounding);
 // - with ROBUST, depth ties: a hit whose f32 t lies within rounding of the
 //   closest one's (far from the origin, surfaces a few ulps of t apart).
-// The second pass orders its contenders by f64 t (a later one wins an exact
+// The second pass orders its contenders by float-float t (a later one wins an exact
 // tie, as in the f32 pass): the closest hit on entry (when its interval meets
 // the closest one's after the f32 pass), that closest one, and the leaf's
 // unsure pairs and, after a tie, its hits within the closest one's interval.
@@ -98,7 +98,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
     uint offset = node_prim_offset(n);
     uint i = 0u;
     bool stopped = false;
-    uint unsure = 0u;          // pairs left to f64
+    uint unsure = 0u;          // pairs left to the exact test
     uint first_unsure = count;
     bool tie = false;          // a hit within rounding of the closest one
     uint in_ref = best.reference;
@@ -113,7 +113,7 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
         float t, u, v, e;
         uint result = intersect_triangle_f32(r.wr, v0, v1, v2, seg_tmin(r), best_reach(best), t, u, v, e);
         if (result == TRI_HIT) {
-            // [t - e, t + e] meets the closest hit's interval: order them in f64 (unless
+            // [t - e, t + e] meets the closest hit's interval: order them by float-float t (unless
             // it is the same triangle, met again in another leaf: the same bits).
             // (has_best is a plain bool so that the && chain stays branch-free up to it.)
             bool has_best = best.reference != NO_REF;

@@ -12,8 +12,8 @@
 // Traversal runs in the ray's *segment frame*: t values measured from
 // wr.seg_origin + wr.seg_lo = origin + wr.t_shift * dir, where t_shift is 0
 // except for robust rays whose origin lies far outside the scene box (see
-// shift_to_scene in trace.comp). There the origin is moved to the box entry
-// (two f32, from f64), so that split decisions carry an error bound in scene
+// shift_to_scene in trace.comp). There the origin is moved to a point just before the box
+// (two f32, from an exact expansion), so that split decisions carry an error bound in scene
 // space (t_err) instead of one relative to a huge t, and hits (best.hit.t and its
 // bound, the f32 triangle test) are in the same frame; tmin and tmax stay the
 // ray's own, and trace.comp converts the hit back when it writes it. The frame

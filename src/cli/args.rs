@@ -25,7 +25,7 @@ pub struct TraversalArgs {
     /// Require this subgroup size (VK_EXT_subgroup_size_control); default: the device's.
     #[arg(long)]
     pub subgroup_size: Option<u32>,
-    /// Turn the robustness measures off: plain f32 split decisions and the f64
+    /// Turn the robustness measures off: plain f32 split decisions and the exact
     /// recompute only at an edge function of 0 (to measure what they cost).
     #[arg(long)]
     pub plain: bool,

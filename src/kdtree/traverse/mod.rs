@@ -94,6 +94,11 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
                 best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
             }
         }
+        // A closed segment (see trace.comp): one float more, when robust.
+        if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
+            clipped = Some((t0, next_up(t1)));
+            best.t = next_up(best.t);
+        }
         if let Some((t0, t1)) = clipped {
             let mut s = State { scene, r: &r, best: Closest::none(best.t), c: &mut c };
             let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
@@ -132,6 +137,18 @@ struct State<'s, 'a> {
     r: &'s TraceRay,
     best: Closest,
     c: &'s mut Counters,
+}
+
+/// Twin of `next_up` in trace.comp: the next float above `x` (`f32::MIN_POSITIVE`
+/// above a zero; infinities and NaN unchanged).
+fn next_up(x: f32) -> f32 {
+    if x.is_infinite() || x.is_nan() {
+        x
+    } else if x == 0.0 {
+        f32::MIN_POSITIVE
+    } else {
+        f32::from_bits(if x > 0.0 { x.to_bits() + 1 } else { x.to_bits() - 1 })
+    }
 }
 
 /// Twin of `is_far` in trace.comp: the box entry `t0` lies more than
