@@ -20,7 +20,7 @@ use kdtrace::consts::{
     BINDING_RAYS, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS,
     COUNTER_TRIANGLES, ORDER_BINDING_RAYS,
 };
-use kdtrace::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Validation};
+use kdtrace::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc};
 use kdtrace::kdtree::traverse::{Counters, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::{camera_rays, shade_headlight, to_image};
@@ -35,16 +35,6 @@ use kdtrace::{Error, Hit, Ray};
 mod engine_abi {
     include!("../src/gpu_struct.rs");
     include!("../glsl/examples/abi.rs");
-}
-
-/// The layer as `common::context` chooses it: required under CI, else if installed.
-fn validation() -> Validation {
-    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
-    if ci {
-        Validation::Required
-    } else {
-        Validation::IfAvailable
-    }
 }
 
 fn out_dir() -> PathBuf {
@@ -72,7 +62,7 @@ fn example_renders_like_kdtrace_render() {
     let (width, height) = (96, 72);
     let path = embed::default_scene();
     let output = out_dir().join("embed.png");
-    let report = embed::run(&path, width, height, Some(&output), validation()).expect("the embed example");
+    let report = embed::run(&path, width, height, Some(&output), common::validation()).expect("the embed example");
     let written = image::open(&output).expect("the example's PNG").to_rgb8();
     assert_eq!(written, report.image, "the PNG holds the rendered frame");
 
@@ -112,7 +102,7 @@ fn example_renders_like_kdtrace_render() {
 
 #[test]
 fn tracers_on_an_adopted_device_leave_nothing_behind() {
-    let engine = Engine::new(validation(), true).unwrap();
+    let engine = Engine::new(common::validation(), true).unwrap();
     let ctx = engine.kdtrace_context().unwrap();
     assert!(ctx.is_adopted() && !ctx.validation_enabled());
     let (cornell, cornell_tree) = load("cornell_box.obj");
@@ -160,7 +150,7 @@ fn tracers_on_an_adopted_device_leave_nothing_behind() {
 #[test]
 fn device_destruction_reports_what_is_left() {
     // The check above is only worth something if a leak does get reported.
-    let engine = Engine::new(validation(), true).unwrap();
+    let engine = Engine::new(common::validation(), true).unwrap();
     if !engine.validation_enabled() {
         eprintln!("VK_LAYER_KHRONOS_validation is not installed: nothing to check");
         return;
@@ -176,12 +166,12 @@ fn device_destruction_reports_what_is_left() {
 fn adopting_checks_features_and_queue() {
     // No core feature is required (the kernels use no 64-bit type): a device
     // created with none is adopted (tests/portability.rs traces and renders on one).
-    let engine = Engine::new(validation(), false).unwrap();
+    let engine = Engine::new(common::validation(), false).unwrap();
     assert!(engine.kdtrace_context().is_ok(), "a device without shaderFloat64 must be accepted");
     let messages = engine.shutdown().unwrap();
     assert!(messages.is_empty(), "{messages:?}");
 
-    let engine = Engine::new(validation(), true).unwrap();
+    let engine = Engine::new(common::validation(), true).unwrap();
     match engine.kdtrace_context_on(999) {
         Err(Error::InvalidInput(m)) => assert!(m.contains("queue family 999"), "{m}"),
         Err(e) => panic!("unexpected error: {e}"),

@@ -10,7 +10,7 @@ mod common;
 mod embed;
 
 use embed::Engine;
-use kdtrace::gpu::{shaders, Validation};
+use kdtrace::gpu::shaders;
 use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::{render, RenderSettings};
@@ -71,19 +71,10 @@ fn no_module_declares_a_64_bit_capability() {
     }
 }
 
-fn validation() -> Validation {
-    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
-    if ci {
-        Validation::Required
-    } else {
-        Validation::IfAvailable
-    }
-}
-
 #[test]
 fn a_device_without_64_bit_features_traces_and_renders() {
     // `false`: the engine enables no core feature at all (no shaderFloat64, no shaderInt64).
-    let engine = Engine::new(validation(), false).unwrap();
+    let engine = Engine::new(common::validation(), false).unwrap();
     assert_eq!(engine.enabled_features.shader_float64, 0);
     assert_eq!(engine.enabled_features.shader_int64, 0);
     let ctx = engine.kdtrace_context().unwrap();

@@ -16,12 +16,20 @@ pub fn context() -> Arc<GpuContext> {
     try_context(false).expect("creating a Vulkan device (run tools/setup)")
 }
 
+/// The validation layer as the tests use it: required under CI, else if installed.
+pub fn validation() -> Validation {
+    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
+    if ci {
+        Validation::Required
+    } else {
+        Validation::IfAvailable
+    }
+}
+
 /// [`context`], with the ray-query backend's extensions enabled when `ray_query`
 /// (an error naming what the device lacks otherwise).
 pub fn try_context(ray_query: bool) -> kdtrace::Result<Arc<GpuContext>> {
-    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false");
-    let validation = if ci { Validation::Required } else { Validation::IfAvailable };
-    let options = ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok(), validation, ray_query };
+    let options = ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok(), validation: validation(), ray_query };
     GpuContext::headless(&options)
 }
 
