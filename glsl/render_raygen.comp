@@ -1,6 +1,7 @@
 #version 450
 // Render pass 1: one camera ray per pixel for sample `sample_index`, jittered
-// inside the pixel by a scrambled Sobol sequence (the pixel centre when there is one sample
+// inside the pixel by a scrambled Sobol sequence (dimensions 2-3, the partner of the
+// first light sample's pair: see ld2_partner; the pixel centre when there is one sample
 // per pixel), in the order of `pixels` (Morton order, so packets hold neighbours).
 // See src/render/wavefront.rs.
 
@@ -31,7 +32,7 @@ void main() {
     // Mode 2 takes the jitter the host computed for the rasterizer's projection
     // (right.w, up.w), so both use one value.
     vec2 jitter = JITTER == JITTER_NONE ? vec2(0.5)
-                : JITTER == JITTER_PER_PIXEL ? ld2(pixel, p.sample_index, 0u, p.seed)
+                : JITTER == JITTER_PER_PIXEL ? ld2_partner(pixel, p.sample_index, 0u, p.seed)
                                : vec2(p.right.w, p.up.w);
     float sx = 2.0 * (float(x) + jitter.x) / float(p.width) - 1.0;
     float sy = 1.0 - 2.0 * (float(y) + jitter.y) / float(p.height);

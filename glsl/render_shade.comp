@@ -104,14 +104,36 @@ vec3 emission(Vertex v, Path path, float t, float ray_length) {
 void sample_area_light(Vertex v, Path path, float bounce_share, out vec3 weight, out vec3 target) {
     weight = vec3(0.0);
     target = vec3(0.0);
-    vec2 u = ld2(path.pixel, p.sample_index, v.base, p.seed);
-    vec2 w = ld2(path.pixel, p.sample_index, v.base + 1u, p.seed);
-    Emitter e = emitters[pick_emitter(u.x)];
-    Surface es = surfaces[e.prim];
-    float su = sqrt(w.x);
-    float c0 = 1.0 - su;
-    float c1 = w.y * su;
-    vec3 y = c0 * es.v0.xyz + c1 * es.v1.xyz + (1.0 - c0 - c1) * es.v2.xyz;
+    // One stratified 2D point picks the emitter and the point on it: w.x picks
+    // by the emitters' cdf, then its place inside the picked emitter's interval
+    // is the point's first coordinate, so every triangle of a lamp receives a
+    // stratified point set (a pick from one pair and the point from another gave
+    // each triangle random points: plain Monte Carlo convergence).
+    // The path's first light sample (at the camera hit, or behind mirrors) takes
+    // pair 0, whose 4D partner (ld2_partner) is the camera jitter: one 4D Sobol
+    // point per sample; later ones take their vertex's own pair.
+    vec2 w = (path.flags & PATH_LIGHT_SAMPLED) == 0u ? ld2(path.pixel, p.sample_index, 0u, p.seed)
+                                                     : ld2(path.pixel, p.sample_index, v.base + 1u, p.seed);
+    uint k = pick_emitter(w.x);
+    Emitter e = emitters[k];
+    float lo = k == 0u ? 0.0 : emitters[k - 1u].cdf;
+    float wx = clamp((w.x - lo) / max(e.cdf - lo, 1e-30), 0.0, uintBitsToFloat(0x3f7fffffu));
+    Surface es = surfaces[e.prim & EMITTER_PRIM_MASK];
+    vec3 y;
+    if ((e.prim & EMITTER_PARALLELOGRAM) != 0u) {
+        // A quad lamp: the square maps affinely onto the parallelogram spanned
+        // from the corner vertex by its two edges.
+        uint corner = (e.prim >> EMITTER_CORNER_SHIFT) & 3u;
+        vec3 c = corner == 0u ? es.v0.xyz : corner == 1u ? es.v1.xyz : es.v2.xyz;
+        vec3 s1 = corner == 0u ? es.v1.xyz : corner == 1u ? es.v2.xyz : es.v0.xyz;
+        vec3 s2 = corner == 0u ? es.v2.xyz : corner == 1u ? es.v0.xyz : es.v1.xyz;
+        y = c + wx * (s1 - c) + w.y * (s2 - c);
+    } else {
+        float su = sqrt(wx);
+        float c0 = 1.0 - su;
+        float c1 = w.y * su;
+        y = c0 * es.v0.xyz + c1 * es.v1.xyz + (1.0 - c0 - c1) * es.v2.xyz;
+    }
     vec3 ny = normalize(cross(es.v1.xyz - es.v0.xyz, es.v2.xyz - es.v0.xyz));
     vec3 d = y - v.x;
     float dist2 = dot(d, d);
@@ -134,9 +156,12 @@ void sample_area_light(Vertex v, Path path, float bounce_share, out vec3 weight,
 
 // Appends the path's next ray from v to the next queue: a mirror reflection
 // with probability p_mirror, else a diffuse bounce (probability bounce_share)
-// when can_bounce; `gather_ao`: v gathered ambient occlusion.
-void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool can_bounce, bool gather_ao) {
+// when can_bounce; `gather_ao`: v gathered ambient occlusion; `light_sampled`:
+// v took an area-light sample.
+void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool can_bounce, bool gather_ao,
+                   bool light_sampled) {
     vec2 u = ld2(path.pixel, p.sample_index, v.base, p.seed);
+    uint sampled = (path.flags & PATH_LIGHT_SAMPLED) | (light_sampled ? PATH_LIGHT_SAMPLED : 0u);
     Path next = path;
     next.depth = path.depth + 1u;
     vec3 dir = vec3(0.0);
@@ -144,12 +169,12 @@ void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool
     if (v.mirror && u.y < p_mirror) {
         dir = reflect(-v.wo, v.n);
         next.throughput = v.thr * v.m.ks.xyz / p_mirror;
-        next.flags = PATH_COUNT_EMISSION | (path.flags & PATH_AO_DONE) | (gather_ao ? PATH_AO_DONE : 0u);
+        next.flags = PATH_COUNT_EMISSION | (path.flags & PATH_AO_DONE) | (gather_ao ? PATH_AO_DONE : 0u) | sampled;
         go = true;
     } else if (can_bounce) {
         dir = cosine_direction(v.n, ld2(path.pixel, p.sample_index, v.base + 2u, p.seed));
         next.throughput = v.thr * v.m.kd.xyz / bounce_share;
-        next.flags = PATH_AO_DONE | (AREA_LIGHTS ? PATH_MIS : 0u);
+        next.flags = PATH_AO_DONE | (AREA_LIGHTS ? PATH_MIS : 0u) | sampled;
         next.pad = floatBitsToUint(bounce_share * max(dot(v.n, dir), 0.0) / PI);
         next.diffuse = path.diffuse + 1u;
         go = true;
@@ -267,7 +292,8 @@ void main() {
     bool lit = !HEADLIGHT && (v.diffuse || v.glossy);
     vec3 area_weight = vec3(0.0);
     vec3 area_target = vec3(0.0);
-    if (AREA_LIGHTS && lit && p.emitter_count > 0u) {
+    bool light_sampled = AREA_LIGHTS && lit && p.emitter_count > 0u;
+    if (light_sampled) {
         sample_area_light(v, path, bounce_share, area_weight, area_target);
         if (luminance(area_weight) > 0.0) shadow_count++;
     }
@@ -291,7 +317,7 @@ void main() {
     }
 
     // The path's next ray: a mirror reflection or a diffuse bounce.
-    if (continues) continue_path(v, path, p_mirror, bounce_share, can_bounce, gather_ao);
+    if (continues) continue_path(v, path, p_mirror, bounce_share, can_bounce, gather_ao, light_sampled);
 
     accum[path.pixel] += vec4(L, 0.0);
 }

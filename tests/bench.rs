@@ -69,7 +69,7 @@ fn bench_matrix_on_the_teapot_fills_every_cell() {
         let key = (r[col("backend")].to_string(), r[col("builder")].to_string(), r[col("traversal")].to_string());
         cells.entry(key).or_default().push(r[col("kind")].to_string());
     }
-    let kinds = ["camera", "shadow", "reflection", "diffuse", "random"];
+    let kinds = ["camera", "shadow", "reflection", "diffuse", "random", "hard"];
     let mut expected = Vec::new();
     for builder in ["default", "pbrt-v3"] {
         for t in ["stack", "stack W4", "short-stack:2", "short-stack:2 W4", "ropes"] {

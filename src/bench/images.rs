@@ -4,6 +4,11 @@
 //! cell with its render time and its error: relative RMSE and SSIM (Wang et al.
 //! 2004, on the tone-mapped luminance) against the reference, rendered once per
 //! scene at `reference_spp` samples and `reference_bounces` bounces.
+//!
+//! Over the samples-per-pixel sweep of one configuration the cells are a
+//! convergence curve: [`convergence`] fits its exponent (RMSE ∝ spp^-e, over
+//! the whole image and off the emitters seen directly) and the wall time to
+//! reach given errors.
 
 use std::path::Path;
 use std::time::Instant;
@@ -36,6 +41,8 @@ pub struct ImageOptions {
     pub reference_spp: u32,
     /// Diffuse bounces of the reference (the most a cell may take).
     pub reference_bounces: u32,
+    /// Ambient-occlusion rays at the first diffuse hit (cells and reference).
+    pub ao_samples: u32,
 }
 
 /// One rendered image and its error.
@@ -61,6 +68,10 @@ pub struct ImageCell {
     pub rmse: f64,
     /// Mean SSIM of the tone-mapped luminance (1 = identical).
     pub ssim: f64,
+    /// RMSE over the pixels that do not see an emitter directly (see
+    /// [`off_emitter_mask`]), relative to the reference's mean there; `None`
+    /// when the scene has no emitters.
+    pub rmse_off_emitters: Option<f64>,
 }
 
 impl ImageCell {
@@ -73,10 +84,60 @@ impl ImageCell {
 
 /// RMSE of `a` against `reference` over all channels, relative to the reference's mean.
 pub fn relative_rmse(a: &[Vec3], reference: &[Vec3]) -> f64 {
-    let n = reference.len().max(1) as f64;
-    let mean = reference.iter().map(|p| f64::from(p.element_sum())).sum::<f64>() / (3.0 * n);
-    let sq: f64 = a.iter().zip(reference).map(|(x, y)| f64::from((*x - *y).length_squared())).sum();
-    (sq / (3.0 * n)).sqrt() / mean.max(f64::MIN_POSITIVE)
+    masked_relative_rmse(a, reference, None)
+}
+
+/// [`relative_rmse`] over the pixels whose `mask` entry is true (all without a mask).
+pub fn masked_relative_rmse(a: &[Vec3], reference: &[Vec3], mask: Option<&[bool]>) -> f64 {
+    let keep = |i: usize| mask.map_or(true, |m| m[i]);
+    let (mut n, mut sum, mut sq) = (0usize, 0.0f64, 0.0f64);
+    for (_, (x, y)) in a.iter().zip(reference).enumerate().filter(|&(i, _)| keep(i)) {
+        n += 1;
+        sum += f64::from(y.element_sum());
+        sq += f64::from((*x - *y).length_squared());
+    }
+    let n = n.max(1) as f64;
+    (sq / (3.0 * n)).sqrt() / (sum / (3.0 * n)).max(f64::MIN_POSITIVE)
+}
+
+/// The pixels that do not see an emitter, directly or in a mirror: true where
+/// neither the pixel nor its 8 neighbours has an emissive first hit (of the
+/// first sample, `first_hits`, row-major) or a `reference` value of at least a
+/// quarter of the dimmest emitter's radiance (luminance; a diffuse surface lit
+/// by the emitters stays below that unless they fill most of its sky). Such
+/// pixels converge at the rate of the light transport; the emitters' own pixels
+/// and their anti-aliased edges at the rate of the pixel filter. `None` when the
+/// scene has no emitter.
+pub fn off_emitter_mask(
+    scene: &Scene,
+    first_hits: &[crate::geom::Hit],
+    reference: &[Vec3],
+    width: u32,
+    height: u32,
+) -> Option<Vec<bool>> {
+    let emissive =
+        |prim: u32| scene.material_ids.get(prim as usize).is_some_and(|&m| scene.materials[m as usize].is_emissive());
+    let luminance = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let dimmest = scene.materials.iter().filter(|m| m.is_emissive()).map(|m| luminance(m.ke)).reduce(f32::min)?;
+    let (w, h) = (width as usize, height as usize);
+    let on: Vec<bool> = first_hits
+        .iter()
+        .zip(reference)
+        .map(|(hit, &c)| emissive(hit.prim_id) || luminance(c) >= 0.25 * dimmest)
+        .collect();
+    let mut mask = vec![true; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if on[y * w + x] {
+                for ny in y.saturating_sub(1)..(y + 2).min(h) {
+                    for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                        mask[ny * w + nx] = false;
+                    }
+                }
+            }
+        }
+    }
+    Some(mask)
 }
 
 /// Mean SSIM over 8×8 windows (stride 4) of the luminance after clamping to [0, 1]
@@ -171,9 +232,19 @@ pub fn run_images(
     base.lights = scene_lights(scene, camera);
     base.max_depth = 8.max(options.reference_bounces + 2);
     progress(&format!("{name}: reference, {} spp, {} bounces", options.reference_spp, options.reference_bounces));
-    let reference_settings =
-        RenderSettings { spp: options.reference_spp, bounces: options.reference_bounces, seed: 0x5eed, ..base.clone() };
+    base.ao_samples = options.ao_samples;
+    let reference_settings = RenderSettings {
+        spp: options.reference_spp,
+        bounces: options.reference_bounces,
+        seed: 0x5eed,
+        keep_first_hits: true,
+        ..base.clone()
+    };
     let reference = render(tracer, scene, camera, &reference_settings, |_, _| {})?;
+    let mask = reference
+        .first_hits
+        .as_deref()
+        .and_then(|hits| off_emitter_mask(scene, hits, &reference.pixels, options.width, options.height));
     if reference.pixels.iter().all(|p| p.max_element() <= 0.0) {
         return Err(Error::InvalidInput(format!("{name}: the reference image is black; no light reaches the camera")));
     }
@@ -205,6 +276,9 @@ pub fn run_images(
                         rays: s.rays(),
                         rmse: relative_rmse(&out.pixels, &reference.pixels),
                         ssim: ssim(&out.pixels, &reference.pixels, out.width, out.height),
+                        rmse_off_emitters: mask
+                            .as_deref()
+                            .map(|m| masked_relative_rmse(&out.pixels, &reference.pixels, Some(m))),
                     });
                 }
             }
@@ -213,20 +287,138 @@ pub fn run_images(
     Ok((cells, reference))
 }
 
+/// One configuration's convergence over its samples-per-pixel sweep.
+#[derive(Clone, Debug)]
+pub struct Convergence {
+    /// Scene name.
+    pub scene: String,
+    /// The configuration: the cell label without its spp.
+    pub config: String,
+    /// The spp range fitted.
+    pub spp: (u32, u32),
+    /// e in RMSE ∝ spp^-e (least squares on the logs): 0.5 is plain Monte
+    /// Carlo, up to 1 (and beyond for smooth integrands) a stratified sampler.
+    pub exponent: f64,
+    /// The same off the emitters seen directly, when the scene has emitters.
+    pub exponent_off_emitters: Option<f64>,
+    /// Per target RMSE (relative), the wall time to reach it from the fit of
+    /// ln RMSE on ln wall time, and whether the target lies outside the measured
+    /// errors (extrapolated).
+    pub time_to: Vec<(f64, f64, bool)>,
+}
+
+/// The least-squares slope of ln y on ln x and its intercept.
+fn log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let pts: Vec<(f64, f64)> =
+        points.iter().filter(|(x, y)| *x > 0.0 && *y > 0.0).map(|(x, y)| (x.ln(), y.ln())).collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let slope = sxy / sxx;
+    Some((slope, my - slope * mx))
+}
+
+/// The convergence of every configuration that has two spp values or more,
+/// with the wall time to each of `targets` (relative RMSE, e.g. 0.02 for 2 %).
+pub fn convergence(cells: &[ImageCell], targets: &[f64]) -> Vec<Convergence> {
+    let config = |c: &ImageCell| {
+        let primary = if c.primary == Primary::Raster { " raster" } else { "" };
+        format!("{} b{primary}, {}", c.bounces, c.traversal)
+    };
+    let mut keys: Vec<(String, String)> = Vec::new();
+    for c in cells {
+        let key = (c.scene.clone(), config(c));
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    let mut found = Vec::new();
+    for (scene, conf) in keys {
+        let series: Vec<&ImageCell> = cells.iter().filter(|c| c.scene == scene && config(c) == conf).collect();
+        let spp = |f: &dyn Fn(&ImageCell) -> Option<f64>| {
+            log_fit(&series.iter().filter_map(|c| Some((f64::from(c.spp), f(c)?))).collect::<Vec<_>>())
+        };
+        let Some((slope, _)) = spp(&|c| Some(c.rmse)) else { continue };
+        let off = spp(&|c| c.rmse_off_emitters).map(|(s, _)| -s);
+        let time_to = match log_fit(&series.iter().map(|c| (c.seconds, c.rmse)).collect::<Vec<_>>()) {
+            Some((b, a)) if b < 0.0 => {
+                let (lo, hi) =
+                    series.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), c| (lo.min(c.rmse), hi.max(c.rmse)));
+                targets.iter().map(|&x| (x, ((x.ln() - a) / b).exp(), x < lo || x > hi)).collect()
+            }
+            _ => Vec::new(),
+        };
+        let lo = series.iter().map(|c| c.spp).min().unwrap_or(0);
+        let hi = series.iter().map(|c| c.spp).max().unwrap_or(0);
+        found.push(Convergence {
+            scene,
+            config: conf,
+            spp: (lo, hi),
+            exponent: -slope,
+            exponent_off_emitters: off,
+            time_to,
+        });
+    }
+    found
+}
+
+/// The convergence fits as a Markdown table.
+pub fn convergence_table(found: &[Convergence]) -> String {
+    let targets: Vec<f64> = found.first().map_or(Vec::new(), |c| c.time_to.iter().map(|t| t.0).collect());
+    let mut s = String::from("| scene | configuration | spp | exponent | exponent off emitters |");
+    let mut rule = String::from("|---|---|---|---|---|");
+    for t in &targets {
+        s += &format!(" time to {} % |", t * 100.0);
+        rule += "---|";
+    }
+    s += "\n";
+    s += &rule;
+    s += "\n";
+    for c in found {
+        s += &format!(
+            "| {} | {} | {}-{} | {:.3} | {} |",
+            c.scene,
+            c.config,
+            c.spp.0,
+            c.spp.1,
+            c.exponent,
+            c.exponent_off_emitters.map_or("-".into(), |e| format!("{e:.3}"))
+        );
+        for t in &targets {
+            match c.time_to.iter().find(|x| x.0 == *t) {
+                Some(&(_, secs, extrapolated)) => {
+                    s += &format!(" {:.3} s{} |", secs, if extrapolated { " (extrapolated)" } else { "" })
+                }
+                None => s += " - |",
+            }
+        }
+        s += "\n";
+    }
+    s
+}
+
 /// The image cells as a Markdown table.
 pub fn images_table(cells: &[ImageCell]) -> String {
     let mut s = String::from(
-        "| scene | settings | wall ms | GPU ms | rays | RMSE vs reference | SSIM |\n|---|---|---|---|---|---|---|\n",
+        "| scene | settings | wall ms | GPU ms | rays | RMSE vs reference | off emitters | SSIM |\n|---|---|---|---|---|---|---|---|\n",
     );
     for c in cells {
         s += &format!(
-            "| {} | {} | {:.1} | {} | {} | {:.2} % | {:.4} |\n",
+            "| {} | {} | {:.1} | {} | {} | {:.2} % | {} | {:.4} |\n",
             c.scene,
             c.label(),
             c.seconds * 1e3,
             c.gpu_seconds.map_or("-".into(), |g| format!("{:.1}", g * 1e3)),
             c.rays,
             c.rmse * 100.0,
+            c.rmse_off_emitters.map_or("-".into(), |r| format!("{:.2} %", r * 100.0)),
             c.ssim
         );
     }
@@ -235,10 +427,12 @@ pub fn images_table(cells: &[ImageCell]) -> String {
 
 /// The image cells as CSV, one row per cell.
 pub fn write_images_csv(path: &Path, cells: &[ImageCell]) -> Result<()> {
-    let mut s = String::from("scene,spp,bounces,primary,traversal,wall_seconds,gpu_seconds,rays,relative_rmse,ssim\n");
+    let mut s = String::from(
+        "scene,spp,bounces,primary,traversal,wall_seconds,gpu_seconds,rays,relative_rmse,ssim,relative_rmse_off_emitters\n",
+    );
     for c in cells {
         s += &format!(
-            "{},{},{},{},{},{:.6},{},{},{:.6},{:.6}\n",
+            "{},{},{},{},{},{:.6},{},{},{:.6},{:.6},{}\n",
             c.scene,
             c.spp,
             c.bounces,
@@ -248,7 +442,8 @@ pub fn write_images_csv(path: &Path, cells: &[ImageCell]) -> Result<()> {
             c.gpu_seconds.map_or(String::new(), |g| format!("{g:.6}")),
             c.rays,
             c.rmse,
-            c.ssim
+            c.ssim,
+            c.rmse_off_emitters.map_or(String::new(), |r| format!("{r:.6}"))
         );
     }
     std::fs::write(path, s).map_err(|source| Error::Io { path: path.to_path_buf(), source })
@@ -285,6 +480,22 @@ pub fn plot_images(path: &Path, cells: &[ImageCell], title: &str) -> Result<()> 
                 .draw()?;
             let front = crate::bench::plot::pareto_front(time_error.clone());
             chart.draw_series(LineSeries::new(front, BLACK.stroke_width(1)))?;
+            // Each configuration's spp sweep as a curve: its slope on these log axes
+            // is the convergence in wall time.
+            let mut configs: Vec<String> = Vec::new();
+            for c in &mine {
+                let key = c.label().split_once(", ").map_or(String::new(), |(_, rest)| rest.to_string());
+                if !configs.contains(&key) {
+                    configs.push(key);
+                }
+            }
+            for key in &configs {
+                let mut curve: Vec<&&ImageCell> =
+                    mine.iter().filter(|c| c.label().split_once(", ").is_some_and(|(_, r)| r == key)).collect();
+                curve.sort_by_key(|c| c.spp);
+                let points: Vec<(f64, f64)> = curve.iter().map(|c| (c.seconds * 1e3, c.rmse * 100.0)).collect();
+                chart.draw_series(LineSeries::new(points, RGBColor(150, 150, 150).stroke_width(1)))?;
+            }
             for c in &mine {
                 let color = if c.primary == Primary::Raster { RGBColor(214, 39, 40) } else { RGBColor(31, 119, 180) };
                 let p = (c.seconds * 1e3, c.rmse * 100.0);

@@ -55,7 +55,7 @@ pub struct BenchArgs {
     pub builders: String,
     /// Ray kinds: camera, shadow, reflection, diffuse, random, hard (the stress
     /// categories of `verify`, 64 rays each).
-    #[arg(long, default_value = "camera,shadow,reflection,diffuse,random")]
+    #[arg(long, default_value = "camera,shadow,reflection,diffuse,random,hard")]
     pub kinds: String,
     /// CPU-twin traversals (rayon over rays), same syntax as --traversals; `none` for none.
     #[arg(long, default_value = "stack")]
@@ -109,6 +109,16 @@ pub struct BenchArgs {
     /// CSV of the image cells.
     #[arg(long, default_value = "bench-images.csv")]
     pub images_csv: PathBuf,
+    /// Ambient-occlusion rays at the first diffuse hit of the image cells and reference.
+    #[arg(long, default_value_t = 0)]
+    pub image_ao: u32,
+    /// Errors (relative RMSE, % of the reference's mean) whose wall time the
+    /// convergence table gives, from each configuration's fit over its spp sweep.
+    #[arg(long, default_value = "5,2,1")]
+    pub image_targets: String,
+    /// Only the image cells (with --images): skip the ray matrix.
+    #[arg(long)]
+    pub images_only: bool,
     #[command(flatten)]
     pub tree: TreeArgs,
 }
@@ -183,8 +193,11 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     let ctx = if args.no_gpu { None } else { Some(backend_context(&backends)?) };
     let device = ctx.as_ref().map_or("no Vulkan device (--no-gpu)".to_string(), |c| c.info.to_string());
     let load_before = load_average();
+    if args.images_only && !args.images {
+        bail!("--images-only needs --images");
+    }
     let mut cells = Vec::new();
-    for path in &args.scenes {
+    for path in args.scenes.iter().filter(|_| !args.images_only) {
         let bar = spinner(format!("loading {}", path.display()));
         let scene = Scene::load(path)?;
         let camera = default_camera(path, &scene)?;
@@ -221,11 +234,15 @@ pub fn bench(args: BenchArgs) -> Result<()> {
          `trace` call with ray upload, submission and readback\n",
         args.repeat
     );
-    println!("## Summary\n\n{}", report::summary_table(&cells));
-    println!("## Every cell\n\n{}", report::markdown_table(&cells));
-    report::write_csv(&args.csv, &cells)?;
     let title = format!("kdtrace bench on {}", ctx.as_ref().map_or("CPU only".into(), |c| c.info.name.clone()));
-    let mut plots = kdtrace::bench::plot::write_plots(&args.plots, &cells, &title)?;
+    let mut plots = Vec::new();
+    if !args.images_only {
+        println!("## Summary\n\n{}", report::summary_table(&cells));
+        println!("## Every cell\n\n{}", report::markdown_table(&cells));
+        report::write_csv(&args.csv, &cells)?;
+        plots = kdtrace::bench::plot::write_plots(&args.plots, &cells, &title)?;
+        plots.insert(0, args.csv.clone());
+    }
     if args.images {
         use kdtrace::bench::images;
         println!(
@@ -235,17 +252,27 @@ pub fn bench(args: BenchArgs) -> Result<()> {
             args.reference_bounces,
             images::images_table(&image_cells)
         );
+        let targets = args
+            .image_targets
+            .split(',')
+            .map(|t| match t.trim().parse::<f64>() {
+                Ok(x) if x > 0.0 && x.is_finite() => Ok(x / 100.0),
+                _ => bail!("--image-targets: '{}' is not a positive percentage", t.trim()),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        println!(
+            "## Convergence\n\nPer configuration, over its spp sweep: RMSE ∝ spp^-exponent (least squares on \
+             the logs; off emitters: the pixels whose first hit and its 8 neighbours' are not emissive), and \
+             the wall time to reach each RMSE from the fit of ln RMSE on ln wall time.\n\n{}",
+            images::convergence_table(&images::convergence(&image_cells, &targets))
+        );
         images::write_images_csv(&args.images_csv, &image_cells)?;
         let png = args.plots.join("bench-images-time-error.png");
         images::plot_images(&png, &image_cells, &format!("{title}: rendered images"))?;
         plots.push(args.images_csv.clone());
         plots.push(png);
     }
-    eprintln!(
-        "wrote {} and {}",
-        args.csv.display(),
-        plots.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
-    );
+    eprintln!("wrote {}", plots.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
     let incomplete: usize = cells.iter().map(|c| c.incomplete).sum();
     if incomplete > 0 {
         let what =
@@ -287,6 +314,7 @@ fn bench_images(
         traversals: expand_traversals(&args.image_traversals, stack_sizes, widths, robust, args.subgroup_size)?,
         reference_spp: args.reference_spp,
         reference_bounces: args.reference_bounces,
+        ao_samples: args.image_ao,
     };
     let mut cells = Vec::new();
     for path in &args.scenes {

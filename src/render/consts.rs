@@ -16,6 +16,17 @@ pub const MAT_MIRROR: u32 = 4;
 /// Ke > 0.
 pub const MAT_EMISSIVE: u32 = 8;
 
+// `Emitter.prim`: the triangle's index in the low bits; a parallelogram flag
+// and its corner above.
+/// The triangle index bits of `Emitter.prim`.
+pub const EMITTER_PRIM_MASK: u32 = (1 << 29) - 1;
+/// The emitter is the parallelogram of its triangle and the triangle mirrored
+/// across the edge opposite the corner `(prim >> EMITTER_CORNER_SHIFT) & 3`
+/// (a quad lamp's two triangles): sampled as one, by an affine map of the square.
+pub const EMITTER_PARALLELOGRAM: u32 = 1 << 31;
+/// Where the corner vertex (0..=2) of a parallelogram emitter sits in `Emitter.prim`.
+pub const EMITTER_CORNER_SHIFT: u32 = 29;
+
 // Indices of the render counters buffer (`u32` each).
 /// Paths appended to the next queue.
 pub const RC_NEXT: u32 = 0;
@@ -167,6 +178,9 @@ pub const RENDER_SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAT_GLOSSY", MAT_GLOSSY),
     ("MAT_MIRROR", MAT_MIRROR),
     ("MAT_EMISSIVE", MAT_EMISSIVE),
+    ("EMITTER_PRIM_MASK", EMITTER_PRIM_MASK),
+    ("EMITTER_PARALLELOGRAM", EMITTER_PARALLELOGRAM),
+    ("EMITTER_CORNER_SHIFT", EMITTER_CORNER_SHIFT),
     ("RC_NEXT", RC_NEXT),
     ("RC_SHADOW", RC_SHADOW),
     ("RC_BAD_RAYS", RC_BAD_RAYS),

@@ -5,13 +5,26 @@ use glam::Vec3;
 
 use super::abi::{in_order, Emitter};
 use super::consts::{
-    MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR, SHADE_SPECS, SHADE_SPEC_AO, SHADE_SPEC_AREA_LIGHTS,
-    SHADE_SPEC_BOUNCES, SHADE_SPEC_CONTINUE, SHADE_SPEC_GLOSSY, SHADE_SPEC_HEADLIGHT, SHADE_SPEC_HEADLIGHT_SHADOWS,
-    SHADE_SPEC_MIRRORS, SHADE_SPEC_POINT_LIGHTS,
+    EMITTER_CORNER_SHIFT, EMITTER_PARALLELOGRAM, EMITTER_PRIM_MASK, MAT_DIFFUSE, MAT_EMISSIVE, MAT_GLOSSY, MAT_MIRROR,
+    SHADE_SPECS, SHADE_SPEC_AO, SHADE_SPEC_AREA_LIGHTS, SHADE_SPEC_BOUNCES, SHADE_SPEC_CONTINUE, SHADE_SPEC_GLOSSY,
+    SHADE_SPEC_HEADLIGHT, SHADE_SPEC_HEADLIGHT_SHADOWS, SHADE_SPEC_MIRRORS, SHADE_SPEC_POINT_LIGHTS,
 };
 use super::settings::{Primary, RenderSettings};
 use crate::error::Result;
 use crate::scene::Scene;
+
+/// When triangles `t` and `u` share an edge and together form a parallelogram
+/// (u is t mirrored through the shared edge's midpoint, to a relative 1e-6 of
+/// their size): the index in `t` of its vertex off the shared edge.
+fn parallelogram_corner(t: &[Vec3; 3], u: &[Vec3; 3]) -> Option<u32> {
+    let shared: Vec<usize> = (0..3).filter(|&i| u.contains(&t[i])).collect();
+    let [i, j] = shared[..] else { return None };
+    let corner = 3 - i - j;
+    let other = u.iter().find(|v| **v != t[i] && **v != t[j])?;
+    let [c, s1, s2, d] = [t[corner], t[i], t[j], *other].map(|v| v.as_dvec3());
+    let size = (s1 - c).length() + (s2 - c).length();
+    ((c + d - s1 - s2).length() <= 1e-6 * size).then_some(corner as u32)
+}
 
 fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
@@ -85,21 +98,43 @@ impl RenderPlan {
         let count_with = |flag: u32| scene.material_ids.iter().filter(|&&m| flags[m as usize] & flag != 0).count();
         let (mirror_tris, glossy_tris) = (count_with(MAT_MIRROR), count_with(MAT_GLOSSY));
 
-        // Emissive triangles, picked in proportion to area × luminance of Ke.
-        let mut emitters = Vec::new();
+        // Emissive triangles, picked in proportion to area × luminance of Ke. Two
+        // consecutive ones of one material that form a parallelogram (a quad lamp)
+        // are one emitter, sampled by an affine map of the unit square: a
+        // stratified point set stays stratified on it (two triangles each sampled
+        // through the square-to-triangle warp lose part of that).
+        let mut emitters: Vec<(u32, f64, f64)> = Vec::new();
         let mut total = 0.0f64;
+        let mut previous: Option<usize> = None;
         for (prim, tri) in scene.triangles.iter().enumerate() {
             let m = scene.material(prim as u32);
             if flags[scene.material_ids[prim] as usize] & MAT_EMISSIVE == 0 {
+                previous = None;
                 continue;
             }
             let [a, b, c] = tri.map(|v| v.as_dvec3());
             let area = 0.5 * (b - a).cross(c - a).length();
             let weight = area * f64::from(luminance(m.ke)).max(1e-6);
-            if area > 0.0 && weight.is_finite() {
-                total += weight;
-                emitters.push((prim as u32, area, weight));
+            if !(area > 0.0 && weight.is_finite()) || prim > EMITTER_PRIM_MASK as usize {
+                previous = None;
+                continue;
             }
+            let pair = previous
+                .filter(|&q| scene.material_ids[q] == scene.material_ids[prim])
+                .and_then(|q| parallelogram_corner(&scene.triangles[q], tri));
+            match (pair, emitters.last_mut()) {
+                (Some(corner), Some(last)) => {
+                    last.0 |= EMITTER_PARALLELOGRAM | (corner << EMITTER_CORNER_SHIFT);
+                    last.1 += area;
+                    last.2 += weight;
+                    previous = None;
+                }
+                _ => {
+                    emitters.push((prim as u32, area, weight));
+                    previous = Some(prim);
+                }
+            }
+            total += weight;
         }
         let mut cumulative = 0.0;
         let emitters: Vec<Emitter> = emitters
@@ -110,6 +145,7 @@ impl RenderPlan {
             })
             .collect();
         let emitter_tris = emitters.len();
+        let parallelograms = emitters.iter().filter(|e| e.prim & EMITTER_PARALLELOGRAM != 0).count();
 
         let lights = !settings.lights.is_empty();
         let ao = settings.ao_samples > 0;
@@ -137,6 +173,11 @@ impl RenderPlan {
         ));
         explain.push(match emitter_tris {
             0 => "emitters: no triangle has a Ke -> area-light sampling and the emitter buffer skipped".into(),
+            n if parallelograms > 0 => format!(
+                "emitters: {} triangles with Ke ({parallelograms} quads sampled as parallelograms) -> next-event \
+                 estimation toward them on",
+                n + parallelograms
+            ),
             n => format!("emitters: {n} triangles with Ke -> next-event estimation toward them on"),
         });
         explain.push(match mirror_tris {
@@ -241,5 +282,25 @@ impl RenderPlan {
             (SHADE_SPEC_HEADLIGHT_SHADOWS, self.headlight_shadows),
         ])
         .map(u32::from)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_quads_two_triangles_form_a_parallelogram_and_other_pairs_do_not() {
+        let [a, b, c, d] = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+        // A fan-triangulated quad: (a, b, c) and (a, c, d); b is off the shared edge a-c.
+        assert_eq!(parallelogram_corner(&[a, b, c], &[a, c, d]), Some(1));
+        assert_eq!(parallelogram_corner(&[c, a, b], &[d, a, c]), Some(2));
+        // A sheared parallelogram still is one.
+        let s = Vec3::new(0.5, 0.0, 0.0);
+        assert_eq!(parallelogram_corner(&[a, b, c + s], &[a, c + s, d + s]), Some(1));
+        // A kite (shared edge, not a parallelogram), a shared vertex only, no shared vertex.
+        assert_eq!(parallelogram_corner(&[a, b, c], &[a, c, Vec3::new(0.2, 1.5, 0.0)]), None);
+        assert_eq!(parallelogram_corner(&[a, b, c], &[a, Vec3::new(-1.0, 0.0, 0.0), Vec3::new(0.0, -1.0, 0.0)]), None);
+        assert_eq!(parallelogram_corner(&[a, b, c], &[d, d + Vec3::X, d + Vec3::Z]), None);
     }
 }

@@ -56,17 +56,19 @@ gpu_struct! {
 }
 
 gpu_struct! {
-    /// An emissive triangle, for next-event estimation: chosen with probability
-    /// `pick` (cumulative `cdf`), proportional to area × luminance of Ke (16 bytes).
+    /// An emissive triangle (or a quad lamp's parallelogram of two), for
+    /// next-event estimation: chosen with probability `pick` (cumulative `cdf`),
+    /// proportional to area × luminance of Ke (16 bytes).
     #[derive(Clone, Copy, Debug, Pod, Zeroable)]
     pub struct Emitter {
-        /// The triangle.
+        /// The triangle, with `EMITTER_PARALLELOGRAM` and its corner above
+        /// `EMITTER_PRIM_MASK` for a parallelogram (src/render/consts.rs).
         pub prim: u32,
         /// Cumulative probability of the emitters up to this one.
         pub cdf: f32,
         /// Probability of choosing this one.
         pub pick: f32,
-        /// Its area.
+        /// Its area (both triangles' for a parallelogram).
         pub area: f32,
     }
 }
