@@ -45,6 +45,11 @@ impl RayQueryScene {
     /// Errors: `Error::DeviceLimit` naming what the device lacks of the ray-query
     /// backend, or a limit the scene exceeds; `Error::InvalidInput` for a scene
     /// without a triangle that can be hit.
+    /// Bytes on the device: the acceleration structures and the id map.
+    pub fn device_bytes(&self) -> u64 {
+        self.accel.device_bytes() + self.prim_ids.size
+    }
+
     pub fn upload(ctx: &Arc<GpuContext>, triangles: &[[Vec3; 3]]) -> Result<RayQueryScene> {
         ctx.ray_query()?;
         let order = driver_order(triangles);

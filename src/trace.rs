@@ -327,7 +327,8 @@ struct SceneBuffers {
 }
 
 impl SceneBuffers {
-    /// Checks `tree` over `triangles` against the device's limits and uploads it.
+    /// Checks `tree` over `triangles` against the device's limits and uploads it
+    /// ([`scene_device_bytes`] bytes).
     fn upload(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<SceneBuffers> {
         if triangles.is_empty() || tree.bounds.is_empty() {
             return Err(Error::InvalidInput("the scene has no triangles that can be hit".into()));
@@ -373,6 +374,17 @@ impl SceneBuffers {
             links: None,
         })
     }
+}
+
+/// Bytes a [`Tracer`] uploads for a kd-tree scene (before the side buffers of
+/// `backtrack` and `ropes`): the nodes (8 bytes each), the leaves' primitive
+/// indices (4 bytes per reference) and a copy of each referenced triangle in leaf
+/// order (48 bytes per reference: its three vertices as texels, so that a
+/// leaf's triangles are contiguous and need no index load; docs/INTERNALS.md
+/// says what a shared, indexed copy cost in speed).
+pub fn scene_device_bytes(tree: &KdTree) -> u64 {
+    let refs = tree.prim_indices.len() as u64;
+    tree.nodes.len() as u64 * 8 + refs * 4 + refs * 48
 }
 
 /// A scene on a device, ready to trace: the kd-tree nodes, primitive indices and
@@ -729,6 +741,20 @@ impl Tracer {
     /// The box around the scene's triangles (rays are clipped to it).
     pub fn bounds(&self) -> Aabb {
         self.scene.bounds()
+    }
+
+    /// Bytes of the scene's buffers on the device (what [`scene_device_bytes`]
+    /// predicts for a kd-tree scene; the ray-query backend's: its vertex buffer
+    /// and acceleration structures), side buffers of `backtrack`/`ropes` included
+    /// once uploaded.
+    pub fn device_bytes(&self) -> u64 {
+        match &self.scene {
+            TracerScene::KdTree(s) => {
+                let links = s.links.as_ref().map_or(0, |l| l.iter().map(|b| b.size).sum());
+                s.nodes.size + s.prim_indices.size + s.triangles.size + links
+            }
+            TracerScene::RayQuery(s) => s.device_bytes(),
+        }
     }
 
     /// Triangles of the scene this tracer holds.

@@ -263,6 +263,72 @@ fn render_explains_what_it_skips_and_writes_exr() {
 }
 
 #[test]
+fn render_compare_measures_every_variant_against_one_converged_reference() {
+    let scene = scene_path("cornell_box.obj");
+    let out = temp("cornell-compare.png");
+    let o = kdtrace(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--spp",
+        "4",
+        "--compare",
+        "--compare-reference-spp",
+        "128",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stderr(&o);
+    assert!(!text.contains("validation:"), "{text}");
+    assert!(text.contains("rendering the reference for --compare: 128 spp"), "{text}");
+    // The RMSE column (the last) of each variant's row.
+    let rmse = |name: &str| -> f64 {
+        let line = text.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("no row '{name}':\n{text}"));
+        line.split_whitespace().last().unwrap().trim_end_matches('%').parse().unwrap()
+    };
+    let first = rmse("as asked (first)");
+    let again = rmse("as asked  ");
+    let no_skip = rmse("--no-skip");
+    let raster = rmse("--primary raster");
+    // The same samples give the same image, so the same error; the 4-spp images
+    // are noisy against the reference, not equal to it.
+    assert_eq!(first, again, "{text}");
+    assert_eq!(first, no_skip, "{text}");
+    // (At 48×36 the lamp's anti-aliased edge pixels dominate: about 190 %.)
+    assert!(first.is_finite() && first > 0.5, "{text}");
+    // Rasterized first hits (one jitter per sample for the whole image) render
+    // another 4-spp estimate of the same picture: an error of the same order.
+    assert!(raster.is_finite() && raster > 0.25 * first && raster < 4.0 * first, "{text}");
+}
+
+#[test]
+fn render_and_stats_read_gltf_with_its_camera() {
+    let (json, bin) = common::gltf_json(r#"{"byteLength": 60}"#, 3);
+    let scene = temp("quads.glb");
+    std::fs::write(&scene, common::glb(&json, &bin)).unwrap();
+    let out = temp("quads.png");
+    let o =
+        kdtrace(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "40", "--height", "30"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("validation:"), "{}", stderr(&o));
+    // The file's camera at (0, 0, 10) looks down -z at the unit quad of node 0
+    // (emissive: Ke (4, 2, 1)), which covers the pixels right of and above the
+    // centre; with a camera framing the whole scene the quad would be elsewhere.
+    let img = image::open(&out).unwrap().to_rgb8();
+    let lamp = img.get_pixel(22, 13);
+    assert!(lamp[0] > 200, "pixel (22, 13) should see the lamp quad: {lamp:?}");
+    let sky = img.get_pixel(5, 25);
+    assert!(sky[0] < 50, "pixel (5, 25) should see nothing: {sky:?}");
+    let o = kdtrace(&["stats", scene.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("\"triangles\":6,"), "{}", String::from_utf8_lossy(&o.stdout));
+}
+
+#[test]
 fn render_rejects_bad_options_with_a_message() {
     let scene = scene_path("teapot.obj");
     let out = temp("bad.png");

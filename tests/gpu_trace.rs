@@ -187,6 +187,8 @@ fn chunked_tracing_gives_the_same_hits() {
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let ctx = context();
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    // What `kdtrace stats` reports as device_bytes is what the tracer uploaded.
+    assert_eq!(tracer.device_bytes(), kdtrace::trace::scene_device_bytes(&tree));
     let rays = random_rays(&mut Rng(7), scene.bounds.min, scene.bounds.max, 5000);
     let whole = tracer.trace(&rays, &TraceOptions::default()).unwrap();
     tracer.set_chunk_size(777);

@@ -335,3 +335,88 @@ fn frame_the_shipped_scenes() {
         assert!(((c.target - c.eye).normalize() - d).length() < 1e-5);
     }
 }
+
+fn check_gltf_scene(s: &Scene) {
+    use glam::{Mat4, Quat};
+    let quad = [Vec3::new(0., 0., 0.), Vec3::new(1., 0., 0.), Vec3::new(1., 1., 0.), Vec3::new(0., 1., 0.)];
+    let parent = Mat4::from_scale_rotation_translation(
+        Vec3::splat(2.),
+        Quat::from_xyzw(0., 0., 0.382_683_43, 0.923_879_5),
+        Vec3::new(10., 0., 0.),
+    );
+    let child = parent * Mat4::from_translation(Vec3::new(0., 5., 0.));
+    let tri = |m: Mat4, a: usize, b: usize, c: usize| -> [Vec3; 3] {
+        [quad[a], quad[b], quad[c]].map(|p| m.transform_point3(p))
+    };
+    let expected = [
+        tri(Mat4::IDENTITY, 0, 1, 2),
+        tri(Mat4::IDENTITY, 0, 2, 3),
+        tri(parent, 0, 1, 2),
+        tri(parent, 0, 2, 3),
+        tri(child, 0, 1, 2), // the strip 0 1 2 3: (0 1 2), (2 1 3)
+        tri(child, 2, 1, 3),
+    ];
+    assert_eq!(s.triangles.len(), expected.len());
+    for (i, (got, want)) in s.triangles.iter().zip(&expected).enumerate() {
+        for k in 0..3 {
+            assert!((got[k] - want[k]).length() < 1e-5, "triangle {i} corner {k}: {got:?} vs {want:?}");
+        }
+    }
+    let loc = |p| s.locate(p).unwrap();
+    assert_eq!((loc(1).instance_id, loc(1).geometry_id, loc(1).prim_index), (0, 0, 1));
+    assert_eq!((loc(3).instance_id, loc(3).geometry_id, loc(3).prim_index), (1, 0, 1));
+    assert_eq!((loc(4).instance_id, loc(4).geometry_id, loc(4).prim_index), (2, 1, 0));
+    let lamp = s.material(0);
+    assert_eq!((lamp.name.as_str(), lamp.kd, lamp.ke), ("lamp", Vec3::new(0.2, 0.4, 0.6), Vec3::new(4., 2., 1.)));
+    assert_eq!(s.material(5).name, "default");
+    let cam = s.camera.as_ref().expect("the glTF camera");
+    assert_eq!(cam.eye, Vec3::new(0., 0., 10.));
+    assert!((cam.target - Vec3::new(0., 0., 9.)).length() < 1e-6 && (cam.fov_deg - 0.8f32.to_degrees()).abs() < 1e-4);
+}
+
+#[test]
+fn gltf_scenes_place_instances_in_node_order() {
+    // Embedded (data: URI), external .bin, and GLB give the same scene.
+    let (json, bin) = common::gltf_json("{}", 3);
+    let embedded = json.replace(
+        "\"buffers\": [{}]",
+        &format!(
+            r#""buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,{}"}}]"#,
+            common::base64(&bin)
+        ),
+    );
+    let (_d1, p1) = write_files("gltf-embedded", &[("scene.gltf", embedded.as_bytes())]);
+    check_gltf_scene(&Scene::load(&p1).unwrap());
+    let external = json.replace("\"buffers\": [{}]", r#""buffers": [{"byteLength": 60, "uri": "quad%20data.bin"}]"#);
+    let (_d2, p2) = write_files("gltf-external", &[("scene.gltf", external.as_bytes()), ("quad data.bin", &bin)]);
+    check_gltf_scene(&Scene::load(&p2).unwrap());
+    let binary = common::glb(&json.replace("\"buffers\": [{}]", r#""buffers": [{"byteLength": 60}]"#), &bin);
+    let (_d3, p3) = write_files("gltf-glb", &[("scene.glb", &binary)]);
+    check_gltf_scene(&Scene::load(&p3).unwrap());
+}
+
+#[test]
+fn bad_gltf_files_fail_with_a_message_naming_them() {
+    let (json, bin) = common::gltf_json("{}", 9);
+    let bad_index = json.replace(
+        "\"buffers\": [{}]",
+        &format!(
+            r#""buffers": [{{"byteLength": 60, "uri": "data:application/octet-stream;base64,{}"}}]"#,
+            common::base64(&bin)
+        ),
+    );
+    let missing = json.replace("\"buffers\": [{}]", r#""buffers": [{"byteLength": 60, "uri": "gone.bin"}]"#);
+    let cases: [(&str, &[u8], &[&str]); 4] = [
+        ("index.gltf", bad_index.as_bytes(), &["index.gltf", "geometry 0", "vertex 9"]),
+        ("missing.gltf", missing.as_bytes(), &["missing.gltf", "buffer 0", "gone.bin"]),
+        ("garbage.gltf", b"{ not json", &["garbage.gltf", "not a valid glTF 2.0 file"]),
+        ("empty.glb", b"", &["empty.glb", "not a valid glTF 2.0 file"]),
+    ];
+    for (name, bytes, needles) in cases {
+        let (_d, p) = write_files("gltf-bad", &[(name, bytes)]);
+        let e = Scene::load(&p).unwrap_err().to_string();
+        for n in needles {
+            assert!(e.contains(n), "{name}: '{e}' lacks '{n}'");
+        }
+    }
+}

@@ -161,7 +161,8 @@ pub fn trace_bar(len: usize) -> ProgressBar {
     bar
 }
 
-/// The camera from `cameras.json` beside the scene (keyed by file stem), else one framing the box.
+/// The camera from `cameras.json` beside the scene (keyed by file stem), else the
+/// scene file's own (glTF), else one framing the box.
 pub fn default_camera(path: &Path, scene: &Scene) -> Result<Camera> {
     let json = path.parent().unwrap_or(Path::new(".")).join("cameras.json");
     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -170,5 +171,5 @@ pub fn default_camera(path: &Path, scene: &Scene) -> Result<Camera> {
             return Ok(camera);
         }
     }
-    Ok(Camera::frame(&scene.bounds))
+    Ok(scene.camera.unwrap_or_else(|| Camera::frame(&scene.bounds)))
 }

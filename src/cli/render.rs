@@ -98,6 +98,11 @@ pub struct RenderArgs {
     /// tracer (pipelines compiled anew), and print what each costs, in one run.
     #[arg(long)]
     pub compare: bool,
+    /// `--compare`'s converged reference: samples per pixel of the image every
+    /// variant's error is measured against (default: 16 × --spp, at least 64; the
+    /// same settings with another seed).
+    #[arg(long)]
+    pub compare_reference_spp: Option<u32>,
     /// First hits: trace (camera rays) or raster (a visibility buffer drawn by a graphics pipeline).
     #[arg(long, default_value = "trace")]
     pub primary: String,
@@ -193,7 +198,11 @@ pub fn render(args: RenderArgs) -> Result<()> {
         render_once(&mut tracer, &settings)?
     };
     if args.compare {
-        compare_renders(&ctx, args.traversal.backend, &tree, &scene, &settings, &out, render_once)?;
+        let reference_spp = args.compare_reference_spp.unwrap_or((settings.spp.saturating_mul(16)).max(64));
+        if reference_spp == 0 {
+            bail!("--compare-reference-spp must be at least 1");
+        }
+        compare_renders(&ctx, args.traversal.backend, &tree, &scene, &settings, &out, reference_spp, render_once)?;
     }
 
     stages.mark("render (pipelines, passes)");
@@ -325,7 +334,11 @@ fn print_summary(args: &RenderArgs, ctx: &GpuContext, out: &kdtrace::render::Ren
 }
 
 /// `render --compare`: the render as asked, without skipping, and with the other
-/// kind of first hits, each on a fresh tracer; a table of their costs.
+/// kind of first hits, each on a fresh tracer; a table of their costs and of each
+/// image's error against one converged reference (the same settings at
+/// `reference_spp` with another seed), so that no row's error mixes in another
+/// row's noise.
+#[allow(clippy::too_many_arguments)]
 fn compare_renders(
     ctx: &std::sync::Arc<GpuContext>,
     backend: Backend,
@@ -333,8 +346,21 @@ fn compare_renders(
     scene: &Scene,
     settings: &RenderSettings,
     first: &kdtrace::render::RenderOutput,
+    reference_spp: u32,
     render_once: impl Fn(&mut Tracer, &RenderSettings) -> kdtrace::Result<kdtrace::render::RenderOutput>,
 ) -> Result<()> {
+    eprintln!("rendering the reference for --compare: {reference_spp} spp");
+    let reference = {
+        let mut tracer = Tracer::with_backend(ctx, backend, tree, &scene.triangles)?;
+        let reference_settings = RenderSettings {
+            spp: reference_spp,
+            seed: settings.seed ^ 0x5eed_f00d,
+            keep_first_hits: false,
+            ..settings.clone()
+        };
+        render_once(&mut tracer, &reference_settings)?.pixels
+    };
+    let rmse = |pixels: &[Vec3]| kdtrace::bench::images::relative_rmse(pixels, &reference);
     let mut variants = vec![("as asked".to_string(), settings.clone())];
     if settings.skip_unneeded {
         variants.push(("--no-skip".into(), RenderSettings { skip_unneeded: false, ..settings.clone() }));
@@ -344,20 +370,13 @@ fn compare_renders(
         Primary::Raster => ("--primary trace", Primary::Trace),
     };
     variants.push((other.0.into(), RenderSettings { primary: other.1, ..settings.clone() }));
-    let mean = first.pixels.iter().map(|p| f64::from(p.element_sum())).sum::<f64>() / (3 * first.pixels.len()) as f64;
     let ms = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{:.1}", s * 1e3));
     eprintln!(
         "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>8}",
         "variant", "setup ms", "loop ms", "trace ms", "shade ms", "raster ms", "rays", "RMSE"
     );
-    for (name, variant) in &variants {
-        // A fresh tracer, so that the variant compiles its own pipelines.
-        let mut tracer = Tracer::with_backend(ctx, backend, tree, &scene.triangles)?;
-        let out = render_once(&mut tracer, variant)?;
+    let row = |name: &str, out: &kdtrace::render::RenderOutput| {
         let s = &out.stats;
-        let sq =
-            out.pixels.iter().zip(&first.pixels).map(|(a, b)| f64::from((*a - *b).length_squared()) / 3.0).sum::<f64>();
-        let rmse = (sq / out.pixels.len() as f64).sqrt() / mean.max(f64::MIN_POSITIVE);
         eprintln!(
             "{:<18} {:>9.1} {:>9.1} {:>9} {:>9} {:>9} {:>11} {:>7.2}%",
             name,
@@ -367,13 +386,23 @@ fn compare_renders(
             ms(s.shade_seconds),
             ms(s.raster_seconds),
             s.rays(),
-            rmse * 100.0
+            rmse(&out.pixels) * 100.0
         );
+    };
+    row("as asked (first)", first);
+    for (name, variant) in &variants {
+        // A fresh tracer, so that the variant compiles its own pipelines.
+        let mut tracer = Tracer::with_backend(ctx, backend, tree, &scene.triangles)?;
+        let out = render_once(&mut tracer, variant)?;
+        row(name, &out);
     }
     eprintln!(
         "(setup: pipelines and uploads; loop: the sample loop's wall time; trace/shade/raster: GPU \
-         timestamps, '-' where the device gave none; RMSE: each image against the first one, relative \
-         to its mean; the first variant ran twice)"
+         timestamps, '-' where the device gave none; RMSE: each image against one reference of \
+         {reference_spp} spp with another seed, relative to its mean; that reference's own noise is \
+         about the RMSE at {} spp times sqrt({} / {reference_spp}); the first variant ran twice, on the \
+         command's tracer and on a fresh one)",
+        settings.spp, settings.spp
     );
     Ok(())
 }

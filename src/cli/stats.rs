@@ -82,6 +82,8 @@ struct Report<'a> {
     stats: &'a BuildStats,
     /// Build times, ascending.
     times: &'a [f64],
+    /// What a tracer uploads for the scene (`kdtrace::trace::scene_device_bytes`).
+    device_bytes: u64,
 }
 
 /// `kdtrace stats`: builds the tree `--repeat` times and prints the statistics of the last.
@@ -106,7 +108,9 @@ pub fn stats(args: StatsArgs) -> Result<()> {
     }
     let tree = tree.expect("built at least once");
     times.sort_by(f64::total_cmp);
-    let report = Report { args: &args, scene: &scene, config: &config, stats: &tree.stats, times: &times };
+    let device_bytes = kdtrace::trace::scene_device_bytes(&tree);
+    let report =
+        Report { args: &args, scene: &scene, config: &config, stats: &tree.stats, times: &times, device_bytes };
     if args.json {
         println!("{}", report.json());
     } else {
@@ -146,6 +150,7 @@ impl Report<'_> {
         o.field("threads", s.threads);
         o.field("node_bytes", s.node_bytes);
         o.field("index_bytes", s.index_bytes);
+        o.field("device_bytes", self.device_bytes);
         o.field("peak_scratch_bytes", s.peak_scratch_bytes);
         o.field("traversal_cost", config.traversal_cost);
         o.field("intersection_cost", config.intersection_cost);
@@ -197,6 +202,12 @@ impl Report<'_> {
             s.index_bytes,
             mib(s.node_bytes + s.index_bytes),
             mib(s.peak_scratch_bytes)
+        );
+        println!(
+            "device copy         {} B ({:.1} MiB, {:.1} B per triangle): nodes, indices, a 48-byte triangle per reference",
+            self.device_bytes,
+            mib(self.device_bytes as usize),
+            self.device_bytes as f64 / self.scene.triangles.len().max(1) as f64
         );
     }
 }

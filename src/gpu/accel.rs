@@ -89,6 +89,11 @@ pub struct TriangleAccel {
 }
 
 impl TriangleAccel {
+    /// Bytes of the two structures' buffers (the vertex buffer is freed after the build).
+    pub fn device_bytes(&self) -> u64 {
+        self.top.buffer.size + self.bottom.buffer.size
+    }
+
     /// Builds the structures over `vertices` (three per triangle, none skipped:
     /// every triangle given is traceable) on the device: the bottom level opaque,
     /// `PREFER_FAST_TRACE` and compacted, then the top level. Submits on the

@@ -6,19 +6,23 @@
 //! of hits. Zero-area triangles are kept so that the numbering holds.
 
 mod camera;
+mod geometry;
+#[cfg(feature = "gltf")]
+mod gltf;
 #[cfg(any(feature = "obj", test))]
 mod obj;
 mod text;
 
 #[cfg(any(feature = "obj", test))]
 use std::collections::HashMap;
-#[cfg(any(feature = "obj", test))]
+#[cfg(any(feature = "obj", feature = "gltf", test))]
 use std::path::Path;
 use std::path::PathBuf;
 
 use glam::Vec3;
 
 pub use camera::Camera;
+pub use geometry::{Geometry, GeometryRange, Indices, Positions, PrimLocation};
 
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
@@ -92,6 +96,11 @@ pub struct Scene {
     /// Number of zero-area triangles ([`crate::kdtree::tree::is_zero_area`], the
     /// builder's rule), kept so that numbering is preserved.
     pub degenerate_count: usize,
+    /// The geometries' ranges of triangle numbers, in order (empty for a scene
+    /// that is one geometry: an OBJ file, `from_triangles`); see [`Scene::locate`].
+    pub geometries: Vec<GeometryRange>,
+    /// The scene file's own camera (glTF: the first camera node), if any.
+    pub camera: Option<Camera>,
 }
 
 impl Scene {
@@ -104,8 +113,26 @@ impl Scene {
     /// a vertex a face uses), a malformed MTL file, and a scene without triangles.
     /// An MTL file that cannot be read, or a `usemtl` of an unknown material, is
     /// a warning on stderr; those faces get the default material.
-    #[cfg(any(feature = "obj", test))]
+    ///
+    /// A `.gltf` or `.glb` file is read as glTF 2.0 instead (feature `gltf`;
+    /// see [`Geometry`] for the numbering and the module `gltf` for what is read).
+    #[cfg(any(feature = "obj", feature = "gltf", test))]
     pub fn load(path: &Path) -> Result<Scene> {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        if ext == "gltf" || ext == "glb" {
+            #[cfg(feature = "gltf")]
+            return gltf::load(path);
+            #[cfg(not(feature = "gltf"))]
+            return Err(text::scene_error(path, None, "reading glTF needs kdtrace's `gltf` feature"));
+        }
+        #[cfg(any(feature = "obj", test))]
+        return Scene::load_obj(path);
+        #[cfg(not(any(feature = "obj", test)))]
+        return Err(text::scene_error(path, None, "reading OBJ needs kdtrace's `obj` feature"));
+    }
+
+    #[cfg(any(feature = "obj", test))]
+    fn load_obj(path: &Path) -> Result<Scene> {
         let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let obj = obj::parse_obj(path, &bytes)?;
         if obj.triangles.is_empty() {
@@ -198,7 +225,16 @@ impl Scene {
     ) -> Scene {
         let bounds = triangles.iter().fold(Aabb::EMPTY, |b, t| b.grow(t[0]).grow(t[1]).grow(t[2]));
         let degenerate_count = triangles.iter().filter(|t| is_zero_area(t)).count();
-        Scene { path, triangles, material_ids, materials, bounds, degenerate_count }
+        Scene {
+            path,
+            triangles,
+            material_ids,
+            materials,
+            bounds,
+            degenerate_count,
+            geometries: Vec::new(),
+            camera: None,
+        }
     }
 }
 

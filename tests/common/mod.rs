@@ -155,3 +155,88 @@ pub fn load_scene<'a>(
         None => tracer.insert(Tracer::new(ctx, tree, triangles).expect("uploading the scene")),
     }
 }
+
+/// A small glTF 2.0 document over one 60-byte buffer (a quad's 4 positions, then
+/// 6 u16 indices): node 0 the quad as is, node 1 the quad moved, turned and
+/// scaled with node 2 (a strip mesh plus a lines primitive) as its child, node 3
+/// a camera at (0, 0, 10). `buffer` is the buffer's JSON (uri or none).
+pub fn gltf_json(buffer: &str, index5: u16) -> (String, Vec<u8>) {
+    let positions = [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]];
+    let mut bin = Vec::new();
+    for p in positions {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u16, 1, 2, 0, 2, index5] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let json = format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "extensionsUsed": ["KHR_materials_emissive_strength"],
+  "scene": 0,
+  "scenes": [{{"nodes": [0, 1, 3]}}],
+  "nodes": [
+    {{"mesh": 0}},
+    {{"mesh": 0, "translation": [10, 0, 0], "rotation": [0, 0, 0.38268343, 0.92387953], "scale": [2, 2, 2], "children": [2]}},
+    {{"mesh": 1, "translation": [0, 5, 0]}},
+    {{"camera": 0, "translation": [0, 0, 10]}}
+  ],
+  "cameras": [{{"type": "perspective", "perspective": {{"yfov": 0.8, "znear": 0.1}}}}],
+  "meshes": [
+    {{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "material": 0}}]}},
+    {{"primitives": [{{"attributes": {{"POSITION": 0}}, "mode": 5}}, {{"attributes": {{"POSITION": 0}}, "mode": 1}}]}}
+  ],
+  "materials": [{{"name": "lamp", "pbrMetallicRoughness": {{"baseColorFactor": [0.2, 0.4, 0.6, 1]}},
+                  "emissiveFactor": [1, 0.5, 0.25],
+                  "extensions": {{"KHR_materials_emissive_strength": {{"emissiveStrength": 4}}}}}}],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+    {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}}
+  ],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+    {{"buffer": 0, "byteOffset": 48, "byteLength": 12}}
+  ],
+  "buffers": [{buffer}]
+}}"#
+    );
+    (json, bin)
+}
+
+pub fn base64(bytes: &[u8]) -> String {
+    const A: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::new();
+    for c in bytes.chunks(3) {
+        let n =
+            (u32::from(c[0]) << 16) | (u32::from(*c.get(1).unwrap_or(&0)) << 8) | u32::from(*c.get(2).unwrap_or(&0));
+        for k in 0..4 {
+            s.push(if k <= c.len() { A[(n >> (18 - 6 * k) & 63) as usize] as char } else { '=' });
+        }
+    }
+    s
+}
+
+/// The GLB container: header, JSON chunk (space-padded), BIN chunk (zero-padded).
+pub fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let mut j = json.as_bytes().to_vec();
+    while j.len() % 4 != 0 {
+        j.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while b.len() % 4 != 0 {
+        b.push(0);
+    }
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((12 + 8 + j.len() + 8 + b.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&j);
+    out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&b);
+    out
+}
