@@ -76,6 +76,18 @@ fn rays_then_trace_writes_one_hit_per_ray() {
         assert_eq!(hits.len(), 5000);
         assert!(hits.iter().filter(|h| h.is_hit()).count() > 500);
     }
+    // The command line keeps a pipeline cache (KDTRACE_PIPELINE_CACHE names it).
+    let cache = temp("pipelines.bin");
+    let _ = std::fs::remove_file(&cache);
+    let o = Command::new(env!("CARGO_BIN_EXE_kdtrace"))
+        .args(["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", hits.to_str().unwrap()])
+        .env("KDTRACE_VALIDATION", "1")
+        .env("KDTRACE_PIPELINE_CACHE", &cache)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&cache).expect("the pipeline cache file");
+    assert!(bytes.len() >= 32 && bytes[..4] == 32u32.to_le_bytes(), "a Vulkan pipeline cache header");
 }
 
 #[test]

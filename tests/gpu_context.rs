@@ -117,3 +117,53 @@ fn empty_scene_is_refused_by_the_tracer() {
     }
     assert_validation_clean(&ctx);
 }
+
+/// A pipeline cache from a file (missing, garbage, or this device's), saved on
+/// request and when the context is dropped; and an engine's own cache.
+#[test]
+fn pipeline_caches_load_save_and_adopt() {
+    let dir = std::env::temp_dir().join(format!("kdtrace-pipeline-cache-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let file = dir.join("sub").join("pipelines.bin");
+    let scene = Scene::load(&scene_path("cornell_box.obj")).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let rays = random_rays(&mut Rng(5), scene.bounds.min, scene.bounds.max, 200);
+    let options = TraceOptions::default();
+    let trace =
+        |ctx: &Arc<GpuContext>| Tracer::new(ctx, &tree, &scene.triangles).unwrap().trace(&rays, &options).unwrap().hits;
+    let header = |bytes: &[u8]| bytes.len() >= 32 && bytes[..4] == 32u32.to_le_bytes();
+
+    let ctx = context();
+    let expected = trace(&ctx);
+    ctx.load_pipeline_cache(&file).unwrap(); // no file yet: an empty cache
+    assert_ne!(ctx.pipeline_cache(), vk::PipelineCache::null());
+    assert_eq!(trace(&ctx), expected);
+    ctx.save_pipeline_cache(&file).unwrap();
+    assert!(header(&std::fs::read(&file).unwrap()), "a cache file starts with its 32-byte header");
+    assert_validation_clean(&ctx);
+    drop(ctx);
+
+    // Bytes that are not this device's cache are not handed to the driver; the
+    // dropped context writes its cache over them.
+    std::fs::write(&file, [7u8; 100]).unwrap();
+    let ctx = context();
+    ctx.load_pipeline_cache(&file).unwrap();
+    assert_eq!(trace(&ctx), expected);
+    assert_validation_clean(&ctx);
+    drop(ctx);
+    assert!(header(&std::fs::read(&file).unwrap()), "saved when the context was dropped");
+
+    // An engine's cache: used, never destroyed by kdtrace.
+    let ctx = context();
+    // SAFETY: the cache is destroyed below, after kdtrace stopped using it.
+    unsafe {
+        let cache = ctx.device.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None).unwrap();
+        ctx.use_pipeline_cache(cache);
+        assert_eq!(ctx.pipeline_cache(), cache);
+        assert_eq!(trace(&ctx), expected);
+        ctx.use_pipeline_cache(vk::PipelineCache::null());
+        ctx.device.destroy_pipeline_cache(cache, None);
+    }
+    assert_validation_clean(&ctx);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,7 +1,7 @@
 //! What several subcommands share: progress bars, stage timings, the scene and
 //! its tree (built or from the tree cache), the device and the default camera.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -152,6 +152,37 @@ pub fn context() -> Result<std::sync::Arc<GpuContext>> {
 pub fn backend_context(backends: &[Backend]) -> Result<std::sync::Arc<GpuContext>> {
     let options = ContextOptions { ray_query: backends.contains(&Backend::RayQuery), ..ContextOptions::from_env() };
     GpuContext::headless(&options).context("creating the Vulkan device")
+}
+
+/// [`backend_context`] with the command line's pipeline cache loaded (and saved
+/// when the context is dropped): `KDTRACE_PIPELINE_CACHE` names the file, or
+/// `off`; by default `$XDG_CACHE_HOME/kdtrace` (else `~/.cache/kdtrace`) holds one
+/// file per device and driver. A cache that cannot be made is a warning.
+pub fn cached_context(backends: &[Backend]) -> Result<std::sync::Arc<GpuContext>> {
+    let ctx = backend_context(backends)?;
+    if let Some(path) = pipeline_cache_path(&ctx) {
+        if let Err(e) = ctx.load_pipeline_cache(&path) {
+            eprintln!("warning: no pipeline cache ({}): {e}", path.display());
+        }
+    }
+    Ok(ctx)
+}
+
+fn pipeline_cache_path(ctx: &GpuContext) -> Option<PathBuf> {
+    match std::env::var_os("KDTRACE_PIPELINE_CACHE") {
+        Some(v) if v == "off" || v == "0" => return None,
+        Some(v) if !v.is_empty() => return Some(PathBuf::from(v)),
+        _ => {}
+    }
+    let dir = std::env::var_os("XDG_CACHE_HOME")
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").filter(|v| !v.is_empty()).map(|h| PathBuf::from(h).join(".cache")))?;
+    let key: String = format!("{}-{}", ctx.info.name, ctx.info.driver)
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '.' { c } else { '_' })
+        .collect();
+    Some(dir.join("kdtrace").join(format!("pipelines-{key}.bin")))
 }
 
 /// A bar counting traced rays out of `len`.

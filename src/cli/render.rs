@@ -14,7 +14,7 @@ use kdtrace::trace::{Backend, TraceOptions, Tracer};
 use kdtrace::traversal::Traversal;
 
 use super::args::{choice, choices, parse_light, parse_vec3, PrimaryKind, TraversalArgs, TreeArgs};
-use super::common::{backend_context, default_camera, load_and_build, trace_bar, Stages};
+use super::common::{cached_context, default_camera, load_and_build, trace_bar, Stages};
 use super::Unfinished;
 
 #[derive(clap::Args)]
@@ -146,7 +146,7 @@ pub fn render(args: RenderArgs) -> Result<()> {
     let mut stages = Stages::new(args.timings);
     let (scene, tree) = load_and_build(&args.scene, &args.tree, &mut stages)?;
     let camera = camera(&args, &scene)?;
-    let ctx = backend_context(&[args.traversal.backend])?;
+    let ctx = cached_context(&[args.traversal.backend])?;
     stages.mark("Vulkan device");
     let mut tracer = Tracer::with_backend(&ctx, args.traversal.backend, &tree, &scene.triangles)?;
     stages.mark("upload the scene");

@@ -11,7 +11,7 @@ use kdtrace::scene::Scene;
 use kdtrace::trace::{Backend, RayOrder, TraceOptions, TracePipelines, Tracer};
 
 use super::args::{TraversalArgs, TreeArgs};
-use super::common::{backend_context, load_and_build, trace_bar, Stages};
+use super::common::{cached_context, load_and_build, trace_bar, Stages};
 use super::Unfinished;
 
 #[derive(clap::Args)]
@@ -64,7 +64,7 @@ pub fn trace(args: TraceArgs) -> Result<()> {
     let (device, loaded) = std::thread::scope(|scope| {
         let device = scope.spawn(|| -> Result<_> {
             let start = Instant::now();
-            let ctx = backend_context(&[backend])?;
+            let ctx = cached_context(&[backend])?;
             let mut pipelines = TracePipelines::new(&ctx);
             pipelines.prepare(backend, &options)?;
             Ok((ctx, pipelines, start.elapsed().as_secs_f64()))

@@ -10,7 +10,7 @@ use kdtrace::scene::Scene;
 use kdtrace::trace::{Backend, TraceOptions, Tracer};
 
 use super::args::{TraversalArgs, TreeArgs};
-use super::common::{backend_context, build_tree, spinner};
+use super::common::{build_tree, cached_context, spinner};
 use super::{Unfinished, EXIT_SERIOUS};
 
 #[derive(clap::Args)]
@@ -78,7 +78,7 @@ pub fn verify(args: VerifyArgs) -> Result<()> {
     let mut tracer = if args.cpu {
         None
     } else {
-        let ctx = backend_context(&[backend])?;
+        let ctx = cached_context(&[backend])?;
         Some((Tracer::with_backend(&ctx, backend, &tree, &scene.triangles)?, ctx))
     };
     let device = tracer.as_ref().map_or("the CPU twin".to_string(), |(_, ctx)| ctx.info.name.clone());

@@ -164,7 +164,7 @@ impl Kernel {
                 .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
                 .stage(stage)
                 .layout(layout)];
-            let pipeline = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            let pipeline = device.create_compute_pipelines(ctx.pipeline_cache(), &info, None);
             device.destroy_shader_module(module, None);
             let pipeline = match pipeline {
                 Ok(p) => p[0],

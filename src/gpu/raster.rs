@@ -329,7 +329,7 @@ impl Rasterizer {
             .layout(self.layout)
             .render_pass(self.render_pass)
             .subpass(0)];
-        let pipelines = device.create_graphics_pipelines(vk::PipelineCache::null(), &info, None);
+        let pipelines = device.create_graphics_pipelines(self.ctx.pipeline_cache(), &info, None);
         device.destroy_shader_module(vert, None);
         device.destroy_shader_module(frag, None);
         match pipelines {
