@@ -629,3 +629,45 @@ fn direct_light_converges_faster_than_plain_monte_carlo() {
     assert!(off.abs() < 0.001, "off-lamp mean differs from the reference by {:.3} %", off * 100.0);
     assert!(whole.abs() < 0.003, "image mean differs from the reference by {:.3} %", whole * 100.0);
 }
+
+#[test]
+fn saved_rays_are_the_rays_the_render_traced() {
+    let scene = Scene::load(&common::scene_path("cornell_box.obj")).unwrap();
+    let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let dir = output_dir().join("saved-rays");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut settings = RenderSettings::new(64, 48);
+    settings.bounces = 2;
+    settings.keep_first_hits = true;
+    settings.save_rays = Some(dir.clone());
+    let ctx = common::context();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let out = render(&mut tracer, &scene, &camera, &settings, |_, _| {}).unwrap();
+    let read = |name: &str| kdtrace::io::read_rays(&dir.join(format!("{name}.rays"))).unwrap();
+    let count = |prefix: &str| {
+        (0..16)
+            .map(|k| format!("{prefix}-{k}"))
+            .filter(|n| dir.join(format!("{n}.rays")).exists())
+            .map(|n| read(&n).len() as u64)
+            .sum::<u64>()
+    };
+    // One sample: the files hold every ray the render counted.
+    let camera_rays = read("camera");
+    assert_eq!(camera_rays.len() as u64, out.stats.camera_rays);
+    assert_eq!(count("secondary"), out.stats.secondary_rays);
+    assert_eq!(count("shadow"), out.stats.shadow_rays);
+    assert!(out.stats.secondary_rays > 0 && out.stats.shadow_rays > 0);
+    // Traced again by the tracer alone, the camera rays give the render's first
+    // hits (the same multiset: the render traces them in its own pixel order).
+    let options = kdtrace::trace::TraceOptions::new(settings.traversal);
+    let again = tracer.trace(&camera_rays, &options).unwrap().hits;
+    let key = |h: &Hit| (h.prim_id, h.t.to_bits(), h.u.to_bits(), h.v.to_bits());
+    let mut a: Vec<_> = again.iter().map(key).collect();
+    let mut b: Vec<_> = out.first_hits.as_ref().unwrap().iter().map(key).collect();
+    a.sort_unstable();
+    b.sort_unstable();
+    assert_eq!(a, b, "the saved camera rays do not give the render's first hits");
+    drop(tracer);
+    common::assert_validation_clean(&ctx);
+}

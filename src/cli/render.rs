@@ -103,6 +103,11 @@ pub struct RenderArgs {
     /// same settings with another seed).
     #[arg(long)]
     pub compare_reference_spp: Option<u32>,
+    /// Write the first sample's rays to this folder (camera.rays, shadow-K.rays,
+    /// secondary-K.rays: 32-byte ray files), to time them with `kdtrace trace`
+    /// (shadow rays with --any-hit).
+    #[arg(long, value_name = "DIR")]
+    pub save_rays: Option<PathBuf>,
     /// First hits: trace (camera rays) or raster (a visibility buffer drawn by a graphics pipeline).
     #[arg(long, default_value = "trace")]
     pub primary: String,
@@ -273,6 +278,7 @@ fn settings(args: &RenderArgs, scene: &Scene, traversal: Traversal, primary: Pri
     settings.traversal = traversal;
     settings.skip_unneeded = !args.no_skip;
     settings.primary = primary;
+    settings.save_rays = args.save_rays.clone();
     settings.lights = args
         .light
         .iter()
@@ -317,6 +323,20 @@ fn print_summary(args: &RenderArgs, ctx: &GpuContext, out: &kdtrace::render::Ren
             s.traced_rays() as f64 / t.max(1e-12) / 1e6,
             sh * 1e3
         );
+        // Where the trace time went: camera, shadow, secondary rays.
+        let part = |name: &str, seconds: Option<f64>, rays: u64| match seconds {
+            Some(t) if rays > 0 => {
+                format!(" {name} {:.1} ms ({:.2} M rays/s)", t * 1e3, rays as f64 / t.max(1e-12) / 1e6)
+            }
+            _ => String::new(),
+        };
+        let camera = if s.rasterized { 0 } else { s.camera_rays };
+        eprint!(
+            " [trace:{}{}{}]",
+            part("camera", s.trace_camera_seconds, camera),
+            part("shadow", s.trace_shadow_seconds, s.shadow_rays),
+            part("secondary", s.trace_secondary_seconds, s.secondary_rays)
+        );
     }
     if s.rasterized {
         let time = s.raster_seconds.map_or(String::new(), |r| format!(" in {:.1} ms", r * 1e3));
@@ -356,6 +376,7 @@ fn compare_renders(
             spp: reference_spp,
             seed: settings.seed ^ 0x5eed_f00d,
             keep_first_hits: false,
+            save_rays: None,
             ..settings.clone()
         };
         render_once(&mut tracer, &reference_settings)?.pixels
@@ -363,13 +384,14 @@ fn compare_renders(
     let rmse = |pixels: &[Vec3]| kdtrace::bench::images::relative_rmse(pixels, &reference);
     let mut variants = vec![("as asked".to_string(), settings.clone())];
     if settings.skip_unneeded {
-        variants.push(("--no-skip".into(), RenderSettings { skip_unneeded: false, ..settings.clone() }));
+        variants
+            .push(("--no-skip".into(), RenderSettings { skip_unneeded: false, save_rays: None, ..settings.clone() }));
     }
     let other = match settings.primary {
         Primary::Trace => ("--primary raster", Primary::Raster),
         Primary::Raster => ("--primary trace", Primary::Trace),
     };
-    variants.push((other.0.into(), RenderSettings { primary: other.1, ..settings.clone() }));
+    variants.push((other.0.into(), RenderSettings { primary: other.1, save_rays: None, ..settings.clone() }));
     let ms = |s: Option<f64>| s.map_or("-".to_string(), |s| format!("{:.1}", s * 1e3));
     eprintln!(
         "{:<18} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>8}",

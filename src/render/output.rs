@@ -16,8 +16,15 @@ pub struct RenderStats {
     pub secondary_rays: u64,
     /// Shadow and ambient-occlusion rays traced (any hit).
     pub shadow_rays: u64,
-    /// GPU time of the trace dispatches (timestamps), when the device has them.
+    /// GPU time of the trace dispatches (timestamps), when the device has them:
+    /// the sum of the three below.
     pub trace_seconds: Option<f64>,
+    /// GPU time of tracing the camera rays (`None` when rasterized).
+    pub trace_camera_seconds: Option<f64>,
+    /// GPU time of tracing the shadow and ambient-occlusion rays (any hit).
+    pub trace_shadow_seconds: Option<f64>,
+    /// GPU time of tracing the reflection and bounce rays.
+    pub trace_secondary_seconds: Option<f64>,
     /// GPU time of the ray generation, shade and resolve dispatches.
     pub shade_seconds: Option<f64>,
     /// Wall time of pipeline creation and uploads.

@@ -4,7 +4,11 @@
 
 use ash::vk;
 
-use super::abi::{RenderParams, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES};
+use std::collections::HashSet;
+use std::io::Write;
+use std::path::Path;
+
+use super::abi::{RenderParams, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, RAY_BYTES};
 use super::consts::{RC_BAD_RAYS, RC_COUNT, RC_NEXT, RC_OVERFLOW, RC_RASTER_EDGE, RC_SHADOW};
 use super::output::RenderStats;
 use super::resources::{RasterPass, Resources};
@@ -28,10 +32,15 @@ pub(super) struct Pass<'a> {
 /// What a timed dispatch was, for the GPU time totals.
 #[derive(Clone, Copy)]
 pub(super) enum Kind {
-    Trace = 0,
-    Shade = 1,
-    Raster = 2,
+    TraceCamera = 0,
+    TraceShadow = 1,
+    TraceSecondary = 2,
+    Shade = 3,
+    Raster = 4,
 }
+
+/// GPU seconds per [`Kind`].
+pub(super) type KindTimes = [f64; 5];
 
 impl<'a> Pass<'a> {
     fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>) -> Self {
@@ -60,9 +69,9 @@ impl<'a> Pass<'a> {
         compute_barrier(self.ctx, cmd);
     }
 
-    unsafe fn trace(&mut self, cmd: vk::CommandBuffer, record: impl FnOnce() -> Result<()>) {
+    unsafe fn trace(&mut self, cmd: vk::CommandBuffer, kind: Kind, record: impl FnOnce() -> Result<()>) {
         let mut result = Ok(());
-        self.timed(cmd, Kind::Trace, || result = record());
+        self.timed(cmd, kind, || result = record());
         if let Err(e) = result {
             self.error.get_or_insert(e);
         }
@@ -87,7 +96,7 @@ impl<'a> Pass<'a> {
     }
 
     /// After the submission completed: adds its GPU times.
-    fn finish(self, times: &mut [f64; 3]) -> Result<()> {
+    fn finish(self, times: &mut KindTimes) -> Result<()> {
         if let Some(e) = self.error {
             return Err(e);
         }
@@ -141,9 +150,42 @@ pub(super) struct Frame<'a> {
     pub(super) params: RenderParams,
     pub(super) stats: RenderStats,
     /// GPU seconds per [`Kind`].
-    pub(super) times: [f64; 3],
+    pub(super) times: KindTimes,
     /// The first sample's hits, row-major, when asked for.
     pub(super) first_hits: Option<Vec<Hit>>,
+    /// Where the first sample's rays go ([`RenderSettings::save_rays`](super::RenderSettings::save_rays)).
+    pub(super) save_rays: Option<&'a Path>,
+    pub(super) saved: SavedRays,
+}
+
+/// The ray files [`Frame`] has written in this render: the first chunk
+/// creates a file, the next ones append to it.
+#[derive(Default)]
+pub(super) struct SavedRays(HashSet<String>);
+
+impl SavedRays {
+    /// Writes the first `count` rays of `rays` (host-visible) to `dir/name.rays`.
+    fn save(&mut self, dir: &Path, name: &str, rays: &Buffer, count: u32) -> Result<()> {
+        if count == 0 {
+            return Ok(());
+        }
+        let bytes = rays.read(0, count as usize * RAY_BYTES as usize)?;
+        let path = dir.join(format!("{name}.rays"));
+        let io = |e: std::io::Error| Error::InvalidInput(format!("saving rays to {}: {e}", path.display()));
+        if self.0.is_empty() {
+            std::fs::create_dir_all(dir).map_err(io)?;
+        }
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .write(true)
+            .append(self.0.contains(name))
+            .truncate(!self.0.contains(name))
+            .open(&path)
+            .map_err(io)?;
+        file.write_all(bytes).map_err(io)?;
+        self.0.insert(name.to_string());
+        Ok(())
+    }
 }
 
 impl Frame<'_> {
@@ -180,7 +222,8 @@ impl Frame<'_> {
                     )
                 });
                 match &res.raster {
-                    None => pass.trace(cmd, || tracer.record_binding(cmd, &res.trace_sets[0], chunk_pixels)),
+                    None => pass
+                        .trace(cmd, Kind::TraceCamera, || tracer.record_binding(cmd, &res.trace_sets[0], chunk_pixels)),
                     Some(RasterPass { rasterizer, visibility, kernel, set }) => {
                         let view = RasterView::new(camera.pinhole(width, height), jitter, width, height, near);
                         pass.raster(cmd, || rasterizer.record(cmd, &view, visibility));
@@ -208,6 +251,9 @@ impl Frame<'_> {
         pass.finish(&mut self.times)?;
         self.stats.submits += 1;
         self.stats.camera_rays += u64::from(chunk_pixels);
+        if let (Some(dir), 0) = (self.save_rays, sample) {
+            self.saved.save(dir, "camera", &res.queues.a.rays, chunk_pixels)?;
+        }
         if let (Some(readback), Some(first), 0) = (&res.hit_readback, &mut self.first_hits, sample) {
             let hits: &[Hit] = bytemuck::cast_slice(readback.read(0, (u64::from(chunk_pixels) * HIT_BYTES) as usize)?);
             for (i, hit) in hits.iter().enumerate() {
@@ -220,11 +266,12 @@ impl Frame<'_> {
     /// The submissions after the camera wave, until no path and no shadow ray
     /// is left: each traces the shadow rays the last shade pass appended and
     /// resolves them, then traces and shades the paths' next rays.
-    pub(super) fn path_waves(&mut self, chunk_pixels: u32) -> Result<()> {
+    pub(super) fn path_waves(&mut self, sample: u32, chunk_pixels: u32) -> Result<()> {
         let (ctx, res, tracer) = (self.ctx, self.res, self.tracer);
         let params = &mut self.params;
         let mut current = 0usize; // which queue holds the paths just shaded
         let mut path_count = chunk_pixels;
+        let mut wave = 0u32;
         loop {
             let [next, shadows, bad, overflow, edges] = read_counters(&res.queues.counters)?;
             self.stats.raster_edge_pixels += u64::from(edges);
@@ -238,6 +285,14 @@ impl Frame<'_> {
             if next == 0 && shadows == 0 {
                 break;
             }
+            if let (Some(dir), 0) = (self.save_rays, sample) {
+                let a_or_b = if current == 0 { res.queues.b_or_a() } else { &res.queues.a };
+                self.saved.save(dir, &format!("secondary-{}", wave + 1), &a_or_b.rays, next)?;
+                if let Some(q) = &res.queues.shadow {
+                    self.saved.save(dir, &format!("shadow-{wave}"), &q.rays, shadows)?;
+                }
+            }
+            wave += 1;
             let mut pass = Pass::new(ctx, res.timestamps.as_ref());
             // SAFETY: as in `camera_wave`.
             unsafe {
@@ -247,7 +302,7 @@ impl Frame<'_> {
                         if let (Some(set), Some(resolve), Some(sets)) =
                             (&res.shadow_set, &res.kernels.resolve, &res.sets.resolve)
                         {
-                            pass.trace(cmd, || tracer.record_binding(cmd, set, shadows));
+                            pass.trace(cmd, Kind::TraceShadow, || tracer.record_binding(cmd, set, shadows));
                             params.count = path_count;
                             pass.shade(cmd, || {
                                 resolve.record_dispatch(cmd, sets[current].set, bytemuck::bytes_of(params), path_count)
@@ -255,7 +310,9 @@ impl Frame<'_> {
                         }
                     }
                     if next > 0 {
-                        pass.trace(cmd, || tracer.record_binding(cmd, &res.trace_sets[1 - current], next));
+                        pass.trace(cmd, Kind::TraceSecondary, || {
+                            tracer.record_binding(cmd, &res.trace_sets[1 - current], next)
+                        });
                         params.count = next;
                         pass.shade(cmd, || {
                             res.kernels.shade.record_dispatch(

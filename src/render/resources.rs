@@ -37,12 +37,13 @@ pub(super) struct Queue {
 }
 
 impl Queue {
-    fn new(ctx: &Ctx, capacity: u64, name: &str) -> Result<Queue> {
+    /// `host_visible`: the rays are read by the host (`save_rays`).
+    fn new(ctx: &Ctx, capacity: u64, name: &str, host_visible: bool) -> Result<Queue> {
         // TRANSFER_SRC: the first hits may be read back (`keep_first_hits`).
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC;
-        let make = |bytes: u64, what: &str| {
-            Buffer::new(ctx, capacity * bytes, usage, MemoryLocation::GpuOnly, &format!("{name} {what}"))
-        };
+        let location = if host_visible { MemoryLocation::GpuToCpu } else { MemoryLocation::GpuOnly };
+        let make =
+            |bytes: u64, what: &str| Buffer::new(ctx, capacity * bytes, usage, location, &format!("{name} {what}"));
         Ok(Queue { rays: make(RAY_BYTES, "rays")?, paths: make(PATH_BYTES, "paths")?, hits: make(HIT_BYTES, "hits")? })
     }
 }
@@ -232,13 +233,14 @@ pub(super) struct Queues {
 }
 
 impl Queues {
-    fn new(ctx: &Ctx, plan: &RenderPlan, sizes: Chunking) -> Result<Queues> {
+    /// `host`: the ray queues are host-visible (`save_rays`).
+    fn new(ctx: &Ctx, plan: &RenderPlan, sizes: Chunking, host: bool) -> Result<Queues> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let Chunking { pixel_count, chunk, shadow_capacity } = sizes;
-        let a = Queue::new(ctx, chunk, "queue A")?;
-        let b = if plan.continue_paths { Some(Queue::new(ctx, chunk, "queue B")?) } else { None };
+        let a = Queue::new(ctx, chunk, "queue A", host)?;
+        let b = if plan.continue_paths { Some(Queue::new(ctx, chunk, "queue B", host)?) } else { None };
         let spans = Buffer::new(ctx, chunk * SPAN_BYTES, storage, MemoryLocation::GpuOnly, "shadow spans")?;
-        let shadow = if plan.shadow_pass { Some(Queue::new(ctx, shadow_capacity, "shadow")?) } else { None };
+        let shadow = if plan.shadow_pass { Some(Queue::new(ctx, shadow_capacity, "shadow", host)?) } else { None };
         let counters = Buffer::new(
             ctx,
             u64::from(RC_COUNT) * COUNTER_BYTES,
@@ -435,7 +437,7 @@ impl Resources {
             tracer.prepare(&any_hit)?;
         }
         let data = SceneBuffers::new(&ctx, scene, settings, plan)?;
-        let queues = Queues::new(&ctx, plan, sizes)?;
+        let queues = Queues::new(&ctx, plan, sizes, settings.save_rays.is_some())?;
         let sets = Sets::new(&ctx, &kernels, &data, &queues)?;
         let b_or_a = queues.b_or_a();
         // SAFETY: the ranges are whole storage buffers of this device, owned by

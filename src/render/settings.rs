@@ -55,6 +55,13 @@ pub struct RenderSettings {
     pub primary: Primary,
     /// Keep the first hits of the first sample ([`RenderOutput::first_hits`](super::RenderOutput::first_hits)).
     pub keep_first_hits: bool,
+    /// Write the first sample's rays to this folder, as ray files `kdtrace
+    /// trace` reads (32 bytes a ray): `camera.rays`, then per wave
+    /// `shadow-K.rays` (the shadow rays of the path vertices at depth K) and
+    /// `secondary-K.rays` (the rays of bounce K). To time the renderer's rays
+    /// with the tracer alone. The ray queues become host-visible memory for
+    /// it (slower on a discrete GPU).
+    pub save_rays: Option<std::path::PathBuf>,
 }
 
 /// How the first hits are found.
@@ -87,6 +94,7 @@ impl RenderSettings {
             skip_unneeded: true,
             primary: Primary::Trace,
             keep_first_hits: false,
+            save_rays: None,
         }
     }
 

@@ -92,8 +92,10 @@ pub fn render_progressive(
         tracer,
         params: params(camera, settings, &plan, res.sizes.shadow_capacity),
         stats: RenderStats { setup_seconds, rasterized: res.raster.is_some(), ..Default::default() },
-        times: [0.0; 3],
+        times: [0.0; 5],
         first_hits,
+        save_rays: settings.save_rays.as_deref(),
+        saved: Default::default(),
     };
     let loop_start = Instant::now();
     let chunks = pixel_count.div_ceil(chunk);
@@ -115,7 +117,7 @@ pub fn render_progressive(
             frame.params.right[3] = jitter[0];
             frame.params.up[3] = jitter[1];
             frame.camera_wave(camera, sample, first_pixel, chunk_pixels, jitter, near)?;
-            frame.path_waves(chunk_pixels)?;
+            frame.path_waves(sample, chunk_pixels)?;
             done += 1;
             progress(done, total);
             let samples = sample + 1;
@@ -132,7 +134,12 @@ pub fn render_progressive(
     // No GPU times where timestamps stop advancing once a draw has run
     // (`GpuContext::timestamps_unreliable`).
     if res.timestamps.is_some() && !ctx.timestamps_unreliable() {
-        stats.trace_seconds = Some(times[Kind::Trace as usize]);
+        let [camera, shadow, secondary] =
+            [Kind::TraceCamera, Kind::TraceShadow, Kind::TraceSecondary].map(|k| times[k as usize]);
+        stats.trace_seconds = Some(camera + shadow + secondary);
+        stats.trace_camera_seconds = (!stats.rasterized).then_some(camera);
+        stats.trace_shadow_seconds = Some(shadow);
+        stats.trace_secondary_seconds = Some(secondary);
         stats.shade_seconds = Some(times[Kind::Shade as usize]);
         if res.raster.is_some() {
             stats.raster_seconds = Some(times[Kind::Raster as usize]);
