@@ -5,15 +5,15 @@
 mod accel;
 mod buffer;
 mod context;
+mod device;
 mod kernel;
+mod pipeline_cache;
 mod raster;
 
 pub use accel::TriangleAccel;
 pub use buffer::{Buffer, BufferRange};
-pub use context::{
-    list_devices, required_features, AdoptDesc, ContextOptions, DeviceInfo, GpuContext, Validation,
-    RAY_QUERY_EXTENSIONS,
-};
+pub use context::{AdoptDesc, ContextOptions, GpuContext, Validation};
+pub use device::{list_devices, required_features, DeviceInfo, RAY_QUERY_EXTENSIONS};
 pub(crate) use kernel::check_range;
 pub use kernel::{in_order, Binding, BufferSet, Kernel, KernelDesc, Timestamps};
 pub use raster::{RasterView, Rasterizer};
