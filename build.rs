@@ -255,9 +255,16 @@ fn write_struct_headers(dir: &Path) -> Result<()> {
 /// The example engine's headers in `dir`: `engine.glsl` (its structs) and
 /// `engine_probe.glsl` (their `put`s).
 fn write_engine_headers(dir: &Path) -> Result<()> {
-    use example_consts::{CameraParams, ShadeParams, Surface};
+    use example_consts::{CameraParams, EngineInstance, EngineMesh, EngineShadeParams, ShadeParams, Surface};
     let source = "glsl/examples/abi.rs";
-    let structs = [CameraParams::GLSL, ShadeParams::GLSL, Surface::GLSL];
+    let structs = [
+        CameraParams::GLSL,
+        ShadeParams::GLSL,
+        Surface::GLSL,
+        EngineShadeParams::GLSL,
+        EngineInstance::GLSL,
+        EngineMesh::GLSL,
+    ];
     write_generated(dir, "engine.glsl", source, &guarded("ENGINE_GLSL", &structs))?;
     let probe = format!(
         "#include \"engine.glsl\"\n\n{}",

@@ -40,7 +40,7 @@ use kdtrace::{Hit, Ray};
 /// The engine's constants and structs shared with its shaders (workgroup size,
 /// bindings, push constants, surfaces): `glsl/examples/abi.rs`, which build.rs
 /// passes to them as `#define`s and generated GLSL declarations.
-mod abi {
+pub mod abi {
     include!(concat!(env!("CARGO_MANIFEST_DIR"), "/src/gpu_struct.rs"));
     include!(concat!(env!("CARGO_MANIFEST_DIR"), "/glsl/examples/abi.rs"));
 }
@@ -106,7 +106,7 @@ pub fn scene_camera(path: &Path, scene: &Scene) -> Result<Camera> {
 
 impl CameraParams {
     /// The same pinhole model as `Camera::ray`: basis in f64, scaled by the field of view.
-    fn new(camera: &Camera, width: u32, height: u32) -> CameraParams {
+    pub fn new(camera: &Camera, width: u32, height: u32) -> CameraParams {
         let forward = (camera.target.as_dvec3() - camera.eye.as_dvec3()).try_normalize().unwrap_or(DVec3::NEG_Z);
         let right = forward.cross(camera.up.as_dvec3()).try_normalize().unwrap_or(forward.any_orthonormal_vector());
         let up = right.cross(forward);
@@ -146,7 +146,7 @@ fn surfaces(scene: &Scene) -> Vec<Surface> {
         .collect()
 }
 
-fn align_up(value: u64, alignment: u64) -> u64 {
+pub fn align_up(value: u64, alignment: u64) -> u64 {
     value.div_ceil(alignment) * alignment
 }
 
@@ -364,11 +364,26 @@ impl Engine {
         };
         let app = vk::ApplicationInfo::default().application_name(c"embed example").api_version(vk::API_VERSION_1_2);
         let layer_names = if with_layer { vec![layer.as_ptr()] } else { vec![] };
-        let extensions = if with_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
-        let info = vk::InstanceCreateInfo::default()
+        let mut extensions = if with_layer { vec![ash::ext::debug_utils::NAME.as_ptr()] } else { vec![] };
+        // Synchronization validation too where the layer offers it: a missing
+        // barrier between the engine's passes and kdtrace's is then reported.
+        // SAFETY: a query of the loader with a valid layer name.
+        let sync_validation = with_layer
+            && unsafe { entry.enumerate_instance_extension_properties(Some(layer)) }
+                .map(|exts| exts.iter().any(|e| e.extension_name_as_c_str() == Ok(ash::ext::validation_features::NAME)))
+                .unwrap_or(false);
+        if sync_validation {
+            extensions.push(ash::ext::validation_features::NAME.as_ptr());
+        }
+        let enables = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut features = vk::ValidationFeaturesEXT::default().enabled_validation_features(&enables);
+        let mut info = vk::InstanceCreateInfo::default()
             .application_info(&app)
             .enabled_layer_names(&layer_names)
             .enabled_extension_names(&extensions);
+        if sync_validation {
+            info = info.push_next(&mut features);
+        }
         // SAFETY: the create info and its strings outlive the call.
         let instance = unsafe { entry.create_instance(&info, None) }?;
         let messages: Box<Mutex<Vec<String>>> = Box::default();
@@ -553,15 +568,15 @@ impl Drop for Engine {
 
 /// A compute pipeline of the engine: storage buffers at bindings `0..n` of set 0.
 #[derive(Clone, Copy)]
-struct Pipeline {
-    pipeline: vk::Pipeline,
-    layout: vk::PipelineLayout,
-    set_layout: vk::DescriptorSetLayout,
+pub struct Pipeline {
+    pub pipeline: vk::Pipeline,
+    pub layout: vk::PipelineLayout,
+    pub set_layout: vk::DescriptorSetLayout,
 }
 
 /// The engine's per-frame objects, destroyed together when dropped (after the
 /// frame's fence, or on an error path after the queue is idle).
-struct Resources<'a> {
+pub struct Resources<'a> {
     engine: &'a Engine,
     buffers: Vec<(vk::Buffer, Option<Allocation>)>,
     pipelines: Vec<Pipeline>,
@@ -569,11 +584,11 @@ struct Resources<'a> {
 }
 
 impl<'a> Resources<'a> {
-    fn new(engine: &'a Engine) -> Resources<'a> {
+    pub fn new(engine: &'a Engine) -> Resources<'a> {
         Resources { engine, buffers: Vec::new(), pipelines: Vec::new(), descriptor_pool: vk::DescriptorPool::null() }
     }
 
-    fn buffer(
+    pub fn buffer(
         &mut self,
         size: u64,
         usage: vk::BufferUsageFlags,
@@ -603,7 +618,7 @@ impl<'a> Resources<'a> {
         Ok(buffer)
     }
 
-    fn allocation(&self, buffer: vk::Buffer) -> Result<&Allocation> {
+    pub fn allocation(&self, buffer: vk::Buffer) -> Result<&Allocation> {
         self.buffers
             .iter()
             .find(|(b, _)| *b == buffer)
@@ -611,18 +626,18 @@ impl<'a> Resources<'a> {
             .ok_or_else(|| anyhow!("no such buffer"))
     }
 
-    fn write(&mut self, buffer: vk::Buffer, data: &[u8]) -> Result<()> {
+    pub fn write(&mut self, buffer: vk::Buffer, data: &[u8]) -> Result<()> {
         let allocation = self.buffers.iter_mut().find(|(b, _)| *b == buffer).and_then(|(_, a)| a.as_mut());
         let mapped = allocation.and_then(|a| a.mapped_slice_mut()).ok_or_else(|| anyhow!("buffer not mapped"))?;
         mapped[..data.len()].copy_from_slice(data);
         Ok(())
     }
 
-    fn read(&self, buffer: vk::Buffer) -> Result<&[u8]> {
+    pub fn read(&self, buffer: vk::Buffer) -> Result<&[u8]> {
         self.allocation(buffer)?.mapped_slice().ok_or_else(|| anyhow!("buffer not mapped"))
     }
 
-    fn pipeline(&mut self, spirv: &[u8], bindings: u32, push_bytes: u32) -> Result<Pipeline> {
+    pub fn pipeline(&mut self, spirv: &[u8], bindings: u32, push_bytes: u32) -> Result<Pipeline> {
         let device = &self.engine.device;
         let code = ash::util::read_spv(&mut std::io::Cursor::new(spirv))?;
         let layout_bindings: Vec<vk::DescriptorSetLayoutBinding> = (0..bindings)
@@ -668,7 +683,7 @@ impl<'a> Resources<'a> {
         }
     }
 
-    fn descriptor_sets<const N: usize>(
+    pub fn descriptor_sets<const N: usize>(
         &mut self,
         layouts: [vk::DescriptorSetLayout; N],
     ) -> Result<[vk::DescriptorSet; N]> {
@@ -688,7 +703,7 @@ impl<'a> Resources<'a> {
     }
 
     /// Writes each `(binding, range)` into `set`.
-    fn write_set(&self, set: vk::DescriptorSet, ranges: &[(u32, BufferRange)]) {
+    pub fn write_set(&self, set: vk::DescriptorSet, ranges: &[(u32, BufferRange)]) {
         let infos: Vec<(u32, [vk::DescriptorBufferInfo; 1])> = ranges
             .iter()
             .map(|&(b, r)| (b, [vk::DescriptorBufferInfo { buffer: r.buffer, offset: r.offset, range: r.range }]))
@@ -707,7 +722,7 @@ impl<'a> Resources<'a> {
         unsafe { self.engine.device.update_descriptor_sets(&writes, &[]) };
     }
 
-    fn command_buffer(&self) -> Result<vk::CommandBuffer> {
+    pub fn command_buffer(&self) -> Result<vk::CommandBuffer> {
         let info = vk::CommandBufferAllocateInfo::default()
             .command_pool(self.engine.command_pool)
             .level(vk::CommandBufferLevel::PRIMARY)

@@ -28,6 +28,27 @@ pub const ENGINE_SHADE_BINDING_PIXELS: u32 = 3;
 /// Number of bindings of `shade.comp`.
 pub const ENGINE_SHADE_BINDINGS: u32 = 4;
 
+// Descriptor bindings of `engine_shade.comp` (set 0; examples/engine.rs).
+/// The rays traced (kdtrace `Ray`s).
+pub const ENGINE_SCENE_BINDING_RAYS: u32 = 0;
+/// Their hits (kdtrace `Hit`s).
+pub const ENGINE_SCENE_BINDING_HITS: u32 = 1;
+/// kdtrace's geometry ranges (`Scene::geometries`, one `uvec4` each: first
+/// prim, triangle count, geometry id, instance id), in prim order.
+pub const ENGINE_SCENE_BINDING_RANGES: u32 = 2;
+/// The engine's instances (`EngineInstance`), indexed by instance id.
+pub const ENGINE_SCENE_BINDING_INSTANCES: u32 = 3;
+/// The engine's meshes (`EngineMesh`), indexed by geometry id.
+pub const ENGINE_SCENE_BINDING_MESHES: u32 = 4;
+/// The interleaved vertices of every mesh (position xyz, normal xyz: 24 bytes).
+pub const ENGINE_SCENE_BINDING_VERTICES: u32 = 5;
+/// The index buffer of every mesh, as 32-bit words (u16 indices two to a word).
+pub const ENGINE_SCENE_BINDING_INDICES: u32 = 6;
+/// The RGBA8 pixels written.
+pub const ENGINE_SCENE_BINDING_PIXELS: u32 = 7;
+/// Number of bindings of `engine_shade.comp`.
+pub const ENGINE_SCENE_BINDINGS: u32 = 8;
+
 // Descriptor bindings of `layout_probe.comp` (tests/layout.rs).
 /// Element 1 of a `ShadeParams` buffer.
 pub const ENGINE_PROBE_BINDING_SHADE_PARAMS: u32 = 0;
@@ -85,6 +106,48 @@ gpu_struct! {
     }
 }
 
+gpu_struct! {
+    /// Push constants of `engine_shade.comp`.
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct EngineShadeParams {
+        /// Pixels shaded.
+        pub count: u32,
+        /// Entries of the geometry-range buffer.
+        pub range_count: u32,
+    }
+}
+
+gpu_struct! {
+    /// One instance of the engine's scene graph (`engine_shade.comp`).
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct EngineInstance {
+        /// Rows 0-2 (xyz) of the normal matrix: the inverse transpose of the
+        /// transform's linear part.
+        pub normal_x: [f32; 4],
+        /// Row 1.
+        pub normal_y: [f32; 4],
+        /// Row 2.
+        pub normal_z: [f32; 4],
+        /// rgb: the instance's colour.
+        pub color: [f32; 4],
+    }
+}
+
+gpu_struct! {
+    /// Where one mesh's data sits in the vertex and index buffers.
+    #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+    pub struct EngineMesh {
+        /// Its first vertex (24-byte vertices).
+        pub first_vertex: u32,
+        /// Its first index word.
+        pub first_word: u32,
+        /// 16 or 32: the index width.
+        pub index_bits: u32,
+        /// Padding to 16 bytes (0).
+        pub pad: u32,
+    }
+}
+
 /// Every constant above, as `#define`s for the example's shaders (read by build.rs).
 #[allow(dead_code)]
 pub const EXAMPLE_SHADER_DEFINES: &[(&str, u32)] = &[
@@ -94,6 +157,14 @@ pub const EXAMPLE_SHADER_DEFINES: &[(&str, u32)] = &[
     ("ENGINE_SHADE_BINDING_HITS", ENGINE_SHADE_BINDING_HITS),
     ("ENGINE_SHADE_BINDING_SURFACES", ENGINE_SHADE_BINDING_SURFACES),
     ("ENGINE_SHADE_BINDING_PIXELS", ENGINE_SHADE_BINDING_PIXELS),
+    ("ENGINE_SCENE_BINDING_RAYS", ENGINE_SCENE_BINDING_RAYS),
+    ("ENGINE_SCENE_BINDING_HITS", ENGINE_SCENE_BINDING_HITS),
+    ("ENGINE_SCENE_BINDING_RANGES", ENGINE_SCENE_BINDING_RANGES),
+    ("ENGINE_SCENE_BINDING_INSTANCES", ENGINE_SCENE_BINDING_INSTANCES),
+    ("ENGINE_SCENE_BINDING_MESHES", ENGINE_SCENE_BINDING_MESHES),
+    ("ENGINE_SCENE_BINDING_VERTICES", ENGINE_SCENE_BINDING_VERTICES),
+    ("ENGINE_SCENE_BINDING_INDICES", ENGINE_SCENE_BINDING_INDICES),
+    ("ENGINE_SCENE_BINDING_PIXELS", ENGINE_SCENE_BINDING_PIXELS),
     ("ENGINE_PROBE_BINDING_SHADE_PARAMS", ENGINE_PROBE_BINDING_SHADE_PARAMS),
     ("ENGINE_PROBE_BINDING_SURFACES", ENGINE_PROBE_BINDING_SURFACES),
     ("ENGINE_PROBE_BINDING_WORDS", ENGINE_PROBE_BINDING_WORDS),

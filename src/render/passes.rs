@@ -292,7 +292,6 @@ impl Frame<'_> {
                     self.saved.save(dir, &format!("shadow-{wave}"), &q.rays, shadows)?;
                 }
             }
-            wave += 1;
             let mut pass = Pass::new(ctx, res.timestamps.as_ref());
             // SAFETY: as in `camera_wave`.
             unsafe {
@@ -300,8 +299,13 @@ impl Frame<'_> {
                     pass.begin(cmd, &res.queues.counters);
                     if shadows > 0 {
                         if let (Some(set), Some(resolve), Some(sets)) =
-                            (&res.shadow_set, &res.kernels.resolve, &res.sets.resolve)
+                            (&res.shadow_sets, &res.kernels.resolve, &res.sets.resolve)
                         {
+                            // The shadow rays of later path vertices are sorted first
+                            // (direction octant, origin cell): incoherent as appended,
+                            // they trace faster sorted, sort included (docs/PACKETS.md,
+                            // "Packets over bounces"); those of camera hits are not.
+                            let set = &set[usize::from(wave > 0)];
                             pass.trace(cmd, Kind::TraceShadow, || tracer.record_binding(cmd, set, shadows));
                             params.count = path_count;
                             pass.shade(cmd, || {
@@ -332,6 +336,7 @@ impl Frame<'_> {
             self.stats.secondary_rays += u64::from(next);
             current = 1 - current;
             path_count = next;
+            wave += 1;
         }
         Ok(())
     }

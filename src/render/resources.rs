@@ -18,7 +18,7 @@ use super::settings::RenderSettings;
 use crate::error::{Error, Result};
 use crate::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Rasterizer, Timestamps};
 use crate::scene::Scene;
-use crate::trace::{TraceBinding, TraceOptions, Tracer};
+use crate::trace::{RayOrder, TraceBinding, TraceOptions, Tracer};
 use crate::traversal::Traversal;
 
 type Ctx = std::sync::Arc<GpuContext>;
@@ -398,8 +398,10 @@ impl RasterPass {
 pub(super) struct Resources {
     /// The closest-hit traces of queue A (index 0) and of queue B (index 1).
     pub(super) trace_sets: [TraceBinding; 2],
-    /// The any-hit trace of the shadow queue.
-    pub(super) shadow_set: Option<TraceBinding>,
+    /// The any-hit traces of the shadow queue: as appended (index 0: the shadow
+    /// rays of the camera hits, coherent already) and sorted on the device first
+    /// (index 1: those of later path vertices, `RayOrder::Coherent`).
+    pub(super) shadow_sets: Option<[TraceBinding; 2]>,
     pub(super) raster: Option<RasterPass>,
     pub(super) timestamps: Option<Timestamps>,
     /// The first sample's hits, read back per chunk when asked for.
@@ -448,11 +450,13 @@ impl Resources {
                 tracer.bind(BufferRange::whole(&b_or_a.rays), BufferRange::whole(&b_or_a.hits), None, &closest)?,
             ]
         };
-        let shadow_set = match &queues.shadow {
+        let shadow_sets = match &queues.shadow {
             // SAFETY: as above.
-            Some(q) => {
-                Some(unsafe { tracer.bind(BufferRange::whole(&q.rays), BufferRange::whole(&q.hits), None, &any_hit)? })
-            }
+            Some(q) => Some(unsafe {
+                let (rays, hits) = (BufferRange::whole(&q.rays), BufferRange::whole(&q.hits));
+                let sorted = TraceOptions { order: RayOrder::Coherent, ..any_hit };
+                [tracer.bind(rays, hits, None, &any_hit)?, tracer.bind(rays, hits, None, &sorted)?]
+            }),
             None => None,
         };
         let raster = match plan.raster {
@@ -470,7 +474,7 @@ impl Resources {
             false => None,
         };
         let timestamps = Timestamps::new(&ctx, 2 * TIMESTAMP_PAIRS)?;
-        Ok(Resources { trace_sets, shadow_set, raster, timestamps, hit_readback, sets, queues, data, kernels, sizes })
+        Ok(Resources { trace_sets, shadow_sets, raster, timestamps, hit_readback, sets, queues, data, kernels, sizes })
     }
 }
 
