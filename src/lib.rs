@@ -141,6 +141,7 @@ mod abi;
 pub mod bench;
 /// Constants shared by Rust and GLSL (passed to every kernel as `#define`s).
 pub mod consts;
+pub mod divergence;
 pub mod error;
 #[cfg(any(feature = "exact", test))]
 pub mod exact;

@@ -538,6 +538,53 @@ fn subgroups_writes_table_csv_and_chart() {
     assert!(image::open(&png).unwrap().width() > 100);
 }
 
+/// `divergence`: the real kernel, the replay of its control flow and the
+/// records' read, timed per scene and kind, with per-stage SIMD efficiency in
+/// (0, 1] and the twin's counters; other variants are refused with a message.
+#[test]
+fn divergence_writes_table_csv_and_chart() {
+    let (csv, png) = (temp("divergence.csv"), temp("divergence.png"));
+    let scene = scene_path("teapot.obj");
+    let o = kdtrace(&[
+        "divergence",
+        scene.to_str().unwrap(),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--random",
+        "2000",
+        "--repeat",
+        "1",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--png",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"));
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2, "{text}");
+    for row in &rows {
+        let num = |name: &str| row[col(name)].parse::<f64>().unwrap();
+        assert!(num("real_s") > 0.0 && num("replay_s") > 0.0 && num("records_read_s") > 0.0, "{text}");
+        for e in ["simd_descent", "simd_leaf", "simd_overall"] {
+            assert!(num(e) > 0.0 && num(e) <= 1.0, "{e}: {text}");
+        }
+        assert!(num("nodes_per_ray") > 1.0 && num("record_bytes") > 0.0, "{text}");
+    }
+    assert_eq!(rows[0][col("kind")], "camera");
+    // Random rays diverge more than camera rays.
+    let eff = |r: &Vec<&str>| r[col("simd_overall")].parse::<f64>().unwrap();
+    assert!(eff(&rows[1]) < eff(&rows[0]), "{text}");
+    assert!(image::open(&png).unwrap().width() > 100);
+    let o = kdtrace(&["divergence", scene.to_str().unwrap(), "--traversal", "restart", "--csv", csv.to_str().unwrap()]);
+    assert!(!o.status.success() && stderr(&o).contains("stack traversal only"), "{}", stderr(&o));
+}
+
 /// `--builder` picks the split search on `trace` (and `stats`): each tree's
 /// hits equal the library's with the same configuration, bit for bit; and
 /// `--timings` prints every stage of the command.

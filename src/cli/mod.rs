@@ -5,6 +5,7 @@
 mod args;
 mod bench;
 mod common;
+mod divergence;
 mod info;
 mod rays;
 mod render;
@@ -16,6 +17,7 @@ mod verify;
 use clap::{Parser, Subcommand};
 
 use self::bench::BenchArgs;
+use self::divergence::DivergenceArgs;
 use self::rays::RaysArgs;
 use self::render::RenderArgs;
 use self::stats::StatsArgs;
@@ -44,6 +46,8 @@ enum Command {
     Bench(BenchArgs),
     /// Sweep packet variants × packet widths × subgroup sizes: table, CSV and PNG chart.
     Subgroups(SubgroupsArgs),
+    /// The real stack kernel against a replay of its control flow without fetches or arithmetic: SIMD efficiency per stage, CSV and chart.
+    Divergence(DivergenceArgs),
     /// Trace hard rays (or a ray file) and compare every answer with the exact reference.
     Verify(VerifyArgs),
     /// List the Vulkan devices and their subgroup properties.
@@ -105,6 +109,7 @@ pub fn run() -> std::process::ExitCode {
         Command::Rays(a) => rays::rays(a),
         Command::Bench(a) => bench::bench(a),
         Command::Subgroups(a) => subgroups::subgroups(a),
+        Command::Divergence(a) => divergence::divergence(a),
         Command::Verify(a) => verify::verify(a),
         Command::Info => info::info(),
     };

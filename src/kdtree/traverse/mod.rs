@@ -66,7 +66,30 @@ impl<'a> SceneRef<'a> {
 /// # Panics
 /// When `Backtrack` or `Ropes` is asked for on a `SceneRef` without links.
 pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -> (Hit, Counters) {
-    let traversal = traversal.into();
+    trace_ray_inner(scene, ray, traversal.into(), None)
+}
+
+/// [`trace_ray`] with the `stack` traversal's control flow appended to `log`:
+/// per visit of a leaf that tested triangles, `[interior nodes (and empty
+/// leaves) stepped through since the previous such leaf, triangles tested]`, and
+/// a last `[steps, 0]` for steps after the last one. The per-lane loop trip
+/// counts of the kernel's descent and leaf loops, for `kdtrace divergence`.
+/// Other variants log nothing.
+pub fn trace_ray_logged(
+    scene: &SceneRef,
+    ray: &Ray,
+    traversal: impl Into<Traversal>,
+    log: &mut Vec<[u32; 2]>,
+) -> (Hit, Counters) {
+    trace_ray_inner(scene, ray, traversal.into(), Some(log))
+}
+
+fn trace_ray_inner(
+    scene: &SceneRef,
+    ray: &Ray,
+    traversal: Traversal,
+    log: Option<&mut Vec<[u32; 2]>>,
+) -> (Hit, Counters) {
     let mut best = Hit { t: ray.tmax, prim_id: PRIM_MISS, u: 0.0, v: 0.0 };
     let mut c = Counters::default();
     if !ray.is_valid() {
@@ -100,7 +123,7 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
             best.t = next_up(best.t);
         }
         if let Some((t0, t1)) = clipped {
-            let mut s = State { scene, r: &r, best: Closest::none(best.t), c: &mut c };
+            let mut s = State { scene, r: &r, best: Closest::none(best.t), c: &mut c, log };
             let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
             let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
             let finished = match traversal.variant {
@@ -137,6 +160,9 @@ struct State<'s, 'a> {
     r: &'s TraceRay,
     best: Closest,
     c: &'s mut Counters,
+    /// `stack` only, when asked ([`trace_ray_logged`]): the control flow, one
+    /// `[descent steps, triangles]` per leaf visit that tested triangles.
+    log: Option<&'s mut Vec<[u32; 2]>>,
 }
 
 /// Twin of `next_up` in trace.comp: the next float above `x` (`f32::MIN_POSITIVE`

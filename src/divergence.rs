@@ -1,0 +1,260 @@
+//! Where a traversal's time goes: divergence, memory or arithmetic (the analysis
+//! at the end of the talk the project was made from; `kdtrace divergence`).
+//!
+//! The talk's experiment: a dummy kernel that follows the real kernel's
+//! execution paths with no memory access and no arithmetic ran as long as the
+//! real one, so the GPU was bound by divergent control flow. Here:
+//!
+//! - [`record`]: the CPU twin of `stack` traces each ray and writes its control
+//!   flow as a compact record — per visit of a leaf that tested triangles, the
+//!   descent steps before it and the triangles it tested (one `u32`, 16 bits
+//!   each), plus an offset per ray. The twin takes the kernel's decisions bit for
+//!   bit (`tests/gpu_trace.rs`), so these are the GPU lanes' loop trip counts.
+//! - [`replay`]: `glsl/divergence_replay.comp` runs those loops lane by lane —
+//!   the same rounds, the same trip counts in each — with one integer
+//!   multiply-add per step instead of node fetches and intersection tests, and a
+//!   second time reading only the records (their own cost).
+//! - [`simd_efficiency`]: the share of a subgroup's lanes busy in each stage
+//!   when its lanes run these loops in lockstep (a subgroup's round lasts as long
+//!   as its longest lane's; finished lanes idle).
+//!
+//! Not reproduced: a memory-only kernel (the same fetches without the
+//! decisions' arithmetic), which needs the visited node and triangle indices in
+//! the records (about 10× their size); other traversal variants than `stack`.
+
+use std::sync::Arc;
+
+use ash::vk;
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::geom::Ray;
+use crate::gpu::{shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
+use crate::kdtree::traverse::{trace_ray_logged, SceneRef};
+use crate::kdtree::KdTree;
+use crate::traversal::{Traversal, Variant};
+
+/// The control flow of a batch of rays in the `stack` traversal.
+#[derive(Clone, Debug, Default)]
+pub struct Records {
+    /// Ray i's words are `words[offsets[i]..offsets[i + 1]]`.
+    pub offsets: Vec<u32>,
+    /// Per leaf visit that tested triangles: descent steps before it (low 16
+    /// bits) and triangles tested (high 16 bits); a last word of trailing steps.
+    pub words: Vec<u32>,
+    /// Nodes, leaf visits (with triangles) and triangle tests, summed over the rays.
+    pub nodes: u64,
+    /// See `nodes`.
+    pub leaves: u64,
+    /// See `nodes`.
+    pub triangles: u64,
+    /// Trip counts above 65,535, clamped in the record.
+    pub clamped: u64,
+}
+
+impl Records {
+    /// Rays recorded.
+    pub fn rays(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Bytes on the device: the offsets and the words.
+    pub fn bytes(&self) -> u64 {
+        4 * (self.offsets.len() + self.words.len()) as u64
+    }
+
+    /// Ray `i`'s `(descent steps, triangles)` per round.
+    pub fn rounds(&self, i: usize) -> impl Iterator<Item = (u32, u32)> + '_ {
+        let (a, b) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
+        self.words[a..b].iter().map(|w| (w & 0xffff, w >> 16))
+    }
+}
+
+/// Records the control flow of `rays` in the `stack` traversal of `traversal`
+/// (its robustness and any-hit settings; the variant must be `Stack`).
+pub fn record(tree: &KdTree, triangles: &[[Vec3; 3]], rays: &[Ray], traversal: Traversal) -> Result<Records> {
+    if traversal.variant != Variant::Stack {
+        return Err(Error::InvalidInput(format!(
+            "divergence records exist for the stack traversal only, not {:?}",
+            traversal.variant
+        )));
+    }
+    let scene = SceneRef::new(tree, triangles);
+    let logs: Vec<(Vec<[u32; 2]>, u64, u64, u64)> = rays
+        .par_iter()
+        .map(|ray| {
+            let mut log = Vec::new();
+            let (_, c) = trace_ray_logged(&scene, ray, traversal, &mut log);
+            (log, u64::from(c.nodes), u64::from(c.leaves), u64::from(c.triangles))
+        })
+        .collect();
+    let mut out = Records { offsets: Vec::with_capacity(rays.len() + 1), ..Default::default() };
+    out.offsets.push(0);
+    for (log, nodes, leaves, tris) in logs {
+        for [d, t] in log {
+            out.clamped += u64::from(d > 0xffff) + u64::from(t > 0xffff);
+            out.words.push(d.min(0xffff) | (t.min(0xffff) << 16));
+        }
+        if out.words.len() > u32::MAX as usize {
+            return Err(Error::InvalidInput("too many rays for one divergence record".into()));
+        }
+        out.offsets.push(out.words.len() as u32);
+        (out.nodes, out.leaves, out.triangles) = (out.nodes + nodes, out.leaves + leaves, out.triangles + tris);
+    }
+    Ok(out)
+}
+
+/// SIMD efficiency per stage: busy lane-steps ÷ (lanes × the subgroup's steps).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Efficiency {
+    /// The descent loop (interior nodes and empty leaves).
+    pub descent: f64,
+    /// The leaf loop (triangle tests).
+    pub leaf: f64,
+    /// Both stages together.
+    pub overall: f64,
+}
+
+/// The efficiency of subgroups of `lanes` consecutive rays running their
+/// records in lockstep: in round k every lane still tracing steps through its
+/// k-th descent, then its k-th leaf; the subgroup takes as many steps as its
+/// busiest lane in each stage, and the lanes that have fewer (or are done) idle.
+pub fn simd_efficiency(records: &Records, lanes: usize) -> Efficiency {
+    let lanes = lanes.max(1);
+    let (mut busy_d, mut steps_d, mut busy_l, mut steps_l) = (0u64, 0u64, 0u64, 0u64);
+    let n = records.rays();
+    let mut group: Vec<Vec<(u32, u32)>> = Vec::with_capacity(lanes);
+    for start in (0..n).step_by(lanes) {
+        group.clear();
+        group.extend((start..(start + lanes).min(n)).map(|i| records.rounds(i).collect()));
+        let rounds = group.iter().map(Vec::len).max().unwrap_or(0);
+        for k in 0..rounds {
+            let (mut max_d, mut max_t) = (0u32, 0u32);
+            for lane in &group {
+                if let Some(&(d, t)) = lane.get(k) {
+                    busy_d += u64::from(d);
+                    busy_l += u64::from(t);
+                    max_d = max_d.max(d);
+                    max_t = max_t.max(t);
+                }
+            }
+            steps_d += u64::from(max_d);
+            steps_l += u64::from(max_t);
+        }
+    }
+    let ratio = |busy: u64, steps: u64| if steps == 0 { 1.0 } else { busy as f64 / (lanes as u64 * steps) as f64 };
+    Efficiency {
+        descent: ratio(busy_d, steps_d),
+        leaf: ratio(busy_l, steps_l),
+        overall: ratio(busy_d + busy_l, steps_d + steps_l),
+    }
+}
+
+/// GPU seconds of the replay kernel and of the records' read alone (medians).
+#[derive(Clone, Copy, Debug)]
+pub struct ReplayTimes {
+    /// The control flow replayed.
+    pub replay_s: f64,
+    /// The records read and summed, no loops.
+    pub read_s: f64,
+}
+
+/// Runs `glsl/divergence_replay.comp` over `records` on `ctx`'s device,
+/// `repeat` times after a warm-up, in both modes. `None` without timestamps.
+pub fn replay(ctx: &Arc<GpuContext>, records: &Records, repeat: usize) -> Result<Option<ReplayTimes>> {
+    let n = records.rays() as u32;
+    let Some(timestamps) = Timestamps::new(ctx, 2)? else { return Ok(None) };
+    let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let offsets = Buffer::with_data(ctx, bytemuck::cast_slice(&records.offsets), storage, "divergence offsets")?;
+    let words = Buffer::with_data(ctx, bytemuck::cast_slice(&records.words), storage, "divergence records")?;
+    let sink =
+        Buffer::new(ctx, 4 * u64::from(n.max(1)), storage, gpu_allocator::MemoryLocation::GpuOnly, "divergence sink")?;
+    let median = |read_only: bool| -> Result<f64> {
+        let kernel = Kernel::new(
+            ctx,
+            &KernelDesc {
+                name: "divergence_replay",
+                spirv: shaders::DIVERGENCE_REPLAY,
+                bindings: 3,
+                push_constant_size: 4,
+                spec_constants: &[u32::from(read_only)],
+                workgroup_size: 64,
+                ..Default::default()
+            },
+        )?;
+        let set = BufferSet::new(ctx, &kernel, &[&offsets, &words, &sink])?;
+        let mut times = Vec::new();
+        for _ in 0..=repeat.max(1) {
+            ctx.submit_and_wait(|cmd| {
+                // SAFETY: `cmd` is recording; the set's buffers outlive the wait.
+                unsafe {
+                    timestamps.record_reset(cmd);
+                    timestamps.record(cmd, 0);
+                    kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&n), n);
+                    timestamps.record(cmd, 1);
+                }
+            })?;
+            times.push(timestamps.seconds_between(0, 1)?);
+        }
+        times.remove(0); // the warm-up (lavapipe compiles on the first dispatch)
+        times.sort_by(f64::total_cmp);
+        Ok(times[times.len() / 2])
+    };
+    let replay_s = median(false)?;
+    let read_s = median(true)?;
+    Ok(Some(ReplayTimes { replay_s, read_s }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kdtree::BuildConfig;
+
+    fn records_of(words: &[&[(u32, u32)]]) -> Records {
+        let mut r = Records { offsets: vec![0], ..Default::default() };
+        for lane in words {
+            r.words.extend(lane.iter().map(|&(d, t)| d | (t << 16)));
+            r.offsets.push(r.words.len() as u32);
+        }
+        r
+    }
+
+    #[test]
+    fn lockstep_efficiency_counts_idle_lanes() {
+        // Two lanes: (3 steps, 2 tris) and (1 step, 4 tris) then (2, 0).
+        let r = records_of(&[&[(3, 2)], &[(1, 4), (2, 0)]]);
+        let e = simd_efficiency(&r, 2);
+        // Descent: busy 3 + 1 + 2 = 6 over 2 × (3 + 2) = 10; leaf: 6 over 2 × 4 = 8.
+        assert!((e.descent - 0.6).abs() < 1e-12 && (e.leaf - 0.75).abs() < 1e-12, "{e:?}");
+        assert!((e.overall - 12.0 / 18.0).abs() < 1e-12);
+        // One lane per subgroup: always busy.
+        assert_eq!(simd_efficiency(&r, 1), Efficiency { descent: 1.0, leaf: 1.0, overall: 1.0 });
+    }
+
+    #[test]
+    fn records_sum_to_the_twins_counters() {
+        let tris: Vec<[Vec3; 3]> = (0..200)
+            .map(|i| {
+                let p = Vec3::new((i % 10) as f32, (i / 10 % 10) as f32, (i / 100) as f32 * 3.0);
+                [p, p + Vec3::X, p + Vec3::Y]
+            })
+            .collect();
+        let tree = KdTree::build(&tris, &BuildConfig::default());
+        let rays = crate::raygen::random_rays(&tree.bounds, 500, 3);
+        let r = record(&tree, &tris, &rays, Traversal::closest(Variant::Stack)).unwrap();
+        let (mut steps, mut visits, mut tested) = (0u64, 0u64, 0u64);
+        for i in 0..r.rays() {
+            for (d, t) in r.rounds(i) {
+                steps += u64::from(d);
+                visits += u64::from(t > 0);
+                tested += u64::from(t);
+            }
+        }
+        // Every node fetched is a descent step or a leaf that tested triangles.
+        assert_eq!(steps + visits, r.nodes);
+        assert_eq!(tested, r.triangles);
+        assert!(visits <= r.leaves && r.triangles > 0);
+        assert!(record(&tree, &tris, &rays, Traversal::closest(Variant::Restart)).is_err());
+    }
+}
