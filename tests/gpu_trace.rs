@@ -293,8 +293,9 @@ fn invalid_and_empty_rays_are_flagged_not_traced() {
 }
 
 /// Pipelines compiled before the scene exists (as the CLI does while the tree
-/// builds) are adopted by the tracer and give the same hits; pipelines of
-/// another context are refused.
+/// builds) are adopted by the tracer and give the same hits; a tracer's
+/// pipelines shared with another scene's tracer are the same pipelines and
+/// outlive the first tracer; pipelines of another context are refused.
 #[test]
 fn pipelines_compiled_in_advance_are_adopted() {
     use kdtrace::trace::{Backend, TracePipelines};
@@ -312,11 +313,41 @@ fn pipelines_compiled_in_advance_are_adopted() {
     assert_eq!(a.len(), b.len());
     assert!(a.iter().zip(&b).all(|(x, y)| same_bits(x, y)));
 
+    // Shared, not copied: a second scene's tracer adopts the first's pipelines,
+    // binds the very same pipeline and traces on after the first is gone.
+    let cornell = Scene::load(&scene_path("cornell_box.obj")).unwrap();
+    let cornell_tree = KdTree::build(&cornell.triangles, &BuildConfig::default());
+    let mut second = Tracer::new(&ctx, &cornell_tree, &cornell.triangles).unwrap();
+    second.adopt_pipelines(adopted.shared_pipelines()).unwrap();
+    let range = |b: &kdtrace::gpu::Buffer| kdtrace::gpu::BufferRange::whole(b);
+    let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER;
+    let location = gpu_allocator::MemoryLocation::GpuOnly;
+    let ray_buf = kdtrace::gpu::Buffer::new(&ctx, 32 * 64, usage, location, "rays").unwrap();
+    let hit_buf = kdtrace::gpu::Buffer::new(&ctx, 16 * 64, usage, location, "hits").unwrap();
+    // SAFETY: whole storage buffers of this device, alive past the bindings.
+    let (first_binding, second_binding) = unsafe {
+        (
+            adopted.bind(range(&ray_buf), range(&hit_buf), None, &options).unwrap(),
+            second.bind(range(&ray_buf), range(&hit_buf), None, &options).unwrap(),
+        )
+    };
+    assert_eq!(first_binding.pipeline(), second_binding.pipeline(), "the shared pipeline is not compiled again");
+    drop((first_binding, second_binding, ray_buf, hit_buf));
+    drop(adopted);
+    let cornell_rays = random_rays(&mut Rng(8), cornell.bounds.min, cornell.bounds.max, 300);
+    let mut cornell_fresh = Tracer::new(&ctx, &cornell_tree, &cornell.triangles).unwrap();
+    let (a, b) = (
+        second.trace(&cornell_rays, &options).unwrap().hits,
+        cornell_fresh.trace(&cornell_rays, &options).unwrap().hits,
+    );
+    assert!(a.iter().zip(&b).all(|(x, y)| same_bits(x, y)));
+    drop((second, cornell_fresh));
+
     let other = common::context();
     assert!(!Arc::ptr_eq(&ctx, &other), "the test needs two contexts");
     let err = fresh.adopt_pipelines(TracePipelines::new(&other)).unwrap_err();
     assert!(err.to_string().contains("another Vulkan context"), "{err}");
-    drop((adopted, fresh));
+    drop(fresh);
     assert_validation_clean(&ctx);
     assert_validation_clean(&other);
 }

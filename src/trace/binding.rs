@@ -82,6 +82,12 @@ impl TraceBinding {
     pub fn options(&self) -> &TraceOptions {
         &self.options
     }
+
+    /// The compute pipeline its first pass runs (the same handle in every tracer
+    /// that shares its pipelines: [`Tracer::shared_pipelines`]).
+    pub fn pipeline(&self) -> vk::Pipeline {
+        self.pipeline
+    }
 }
 
 impl std::fmt::Debug for TraceBinding {

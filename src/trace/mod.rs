@@ -293,7 +293,8 @@ impl Tracer {
     }
 
     /// Takes over pipelines compiled in advance ([`TracePipelines`]) for the
-    /// same context; those it already has are kept (bindings stay valid).
+    /// same context, or shared by another tracer ([`Tracer::shared_pipelines`]);
+    /// those it already has are kept (bindings stay valid).
     ///
     /// Errors: `Error::InvalidInput` when they were compiled for another context.
     pub fn adopt_pipelines(&mut self, pipelines: TracePipelines) -> Result<()> {
@@ -305,7 +306,18 @@ impl Tracer {
                 self.pipelines.kernels.push((key, kernels));
             }
         }
+        if self.pipelines.order.is_none() {
+            self.pipelines.order = pipelines.order;
+        }
         Ok(())
+    }
+
+    /// The pipelines this tracer has compiled so far, shared, not copied: give
+    /// them to another tracer of the same context ([`Tracer::adopt_pipelines`])
+    /// and it compiles none of them again (a double-buffered scene: the next
+    /// frame's tracer adopts the current one's).
+    pub fn shared_pipelines(&self) -> TracePipelines {
+        self.pipelines.clone()
     }
 
     /// Compiles the pipeline of `options` and, for `backtrack` and `ropes`, uploads

@@ -20,11 +20,17 @@ use super::{Backend, RayOrder, TraceOptions, TraceParams};
 /// them on another thread while the scene loads and its tree builds, then hand
 /// them to the tracer ([`Tracer::adopt_pipelines`](super::Tracer::adopt_pipelines)). A [`Tracer`](super::Tracer) also compiles
 /// what it lacks on first use ([`Tracer::prepare`](super::Tracer::prepare)).
+///
+/// Cloning shares the compiled pipelines (reference counts, no compile): one set
+/// can serve several tracers of a context, e.g. the two scenes of a
+/// double-buffered pair ([`Tracer::shared_pipelines`](super::Tracer::shared_pipelines)).
+/// A pipeline is destroyed with the last tracer or set that holds it.
+#[derive(Clone)]
 pub struct TracePipelines {
     pub(super) ctx: Arc<GpuContext>,
     /// By backend, traversal (normalized: settings a kernel ignores are reset)
     /// and counters; bindings refer to kernels by their index here.
-    pub(super) kernels: Vec<((Backend, Traversal, bool), TraceKernels)>,
+    pub(super) kernels: Vec<((Backend, Traversal, bool), Arc<TraceKernels>)>,
     /// The ordering kernel's three steps (`RayOrder::Coherent`), compiled on first use.
     pub(super) order: Option<Arc<[Kernel; 3]>>,
 }
@@ -150,7 +156,7 @@ impl TracePipelines {
                 careful: None,
             }
         };
-        self.kernels.push(((Backend::KdTree, key, counters), kernels));
+        self.kernels.push(((Backend::KdTree, key, counters), Arc::new(kernels)));
         Ok(self.kernels.len() - 1)
     }
 
@@ -167,7 +173,7 @@ impl TracePipelines {
             return Ok(i);
         }
         let main = crate::ray_query::kernel(&self.ctx, any_hit)?;
-        self.kernels.push((key, TraceKernels { main, careful: None }));
+        self.kernels.push((key, Arc::new(TraceKernels { main, careful: None })));
         Ok(self.kernels.len() - 1)
     }
 }
