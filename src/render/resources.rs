@@ -18,7 +18,7 @@ use super::settings::RenderSettings;
 use crate::error::{Error, Result};
 use crate::gpu::{shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Rasterizer, Timestamps};
 use crate::scene::Scene;
-use crate::trace::{RayOrder, TraceBinding, TraceOptions, Tracer};
+use crate::trace::{Backend, RayOrder, TraceBinding, TraceOptions, Tracer};
 use crate::traversal::Traversal;
 
 type Ctx = std::sync::Arc<GpuContext>;
@@ -454,7 +454,9 @@ impl Resources {
             // SAFETY: as above.
             Some(q) => Some(unsafe {
                 let (rays, hits) = (BufferRange::whole(&q.rays), BufferRange::whole(&q.hits));
-                let sorted = TraceOptions { order: RayOrder::Coherent, ..any_hit };
+                // Sorting is the kd-tree kernels' (the ray-query kernel traces rays as given).
+                let order = if tracer.backend() == Backend::KdTree { RayOrder::Coherent } else { RayOrder::AsGiven };
+                let sorted = TraceOptions { order, ..any_hit };
                 [tracer.bind(rays, hits, None, &any_hit)?, tracer.bind(rays, hits, None, &sorted)?]
             }),
             None => None,

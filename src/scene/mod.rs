@@ -135,7 +135,7 @@ impl Scene {
     fn load_obj(path: &Path) -> Result<Scene> {
         let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         let obj = obj::parse_obj(path, &bytes)?;
-        if obj.triangles.is_empty() {
+        if obj.triangle_count() == 0 {
             return Err(text::scene_error(path, None, "scene has no triangles"));
         }
 
@@ -180,7 +180,21 @@ impl Scene {
         if material_ids.contains(&default_id) {
             materials.push(Material::default());
         }
-        Ok(Scene::assemble(Some(path.to_path_buf()), obj.triangles, material_ids, materials))
+        Scene::from_obj(path, &obj, material_ids, materials)
+    }
+
+    /// The parsed OBJ as one indexed geometry (id 0, instance 0) through
+    /// [`Scene::from_geometries`], the API engines use; then the faces' own
+    /// materials (`usemtl`), triangle by triangle.
+    #[cfg(any(feature = "obj", test))]
+    fn from_obj(path: &Path, obj: &obj::ObjFile, material_ids: Vec<u32>, materials: Vec<Material>) -> Result<Scene> {
+        let geometry = Geometry::new(0, &obj.positions).with_indices(Indices::U32(&obj.indices));
+        let mut scene = Scene::from_geometries(&[geometry], Vec::new())
+            .map_err(|e| text::scene_error(path, None, e.to_string()))?;
+        scene.path = Some(path.to_path_buf());
+        scene.material_ids = material_ids;
+        scene.materials = materials;
+        Ok(scene)
     }
 
     /// A scene from OBJ text in memory, geometry only: `mtllib` is not followed
@@ -189,11 +203,11 @@ impl Scene {
     #[cfg(any(feature = "obj", test))]
     pub fn from_obj_bytes(name: &Path, bytes: &[u8]) -> Result<Scene> {
         let obj = obj::parse_obj(name, bytes)?;
-        if obj.triangles.is_empty() {
+        if obj.triangle_count() == 0 {
             return Err(text::scene_error(name, None, "scene has no triangles"));
         }
-        let ids = vec![0; obj.triangles.len()];
-        Ok(Scene::assemble(Some(name.to_path_buf()), obj.triangles, ids, vec![Material::default()]))
+        let ids = vec![0; obj.triangle_count()];
+        Scene::from_obj(name, &obj, ids, vec![Material::default()])
     }
 
     /// A scene of the given triangles with one default material. Fails with

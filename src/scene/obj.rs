@@ -23,17 +23,35 @@ use crate::error::Result;
 /// `ObjFile::usemtl` of a triangle that comes before any `usemtl`.
 pub(crate) const NO_USEMTL: u32 = u32::MAX;
 
-/// The geometry of an OBJ file, triangles numbered in face order.
+/// The geometry of an OBJ file, triangles numbered in face order: an indexed
+/// mesh, which `Scene::load` hands to `Scene::from_geometries` as one
+/// [`Geometry`](super::Geometry) like any other.
 #[derive(Debug, Default)]
 pub(crate) struct ObjFile {
-    /// Every face fanned into triangles, in the order the faces appear.
-    pub triangles: Vec<[Vec3; 3]>,
+    /// Every `v` statement's position, in file order.
+    pub positions: Vec<Vec3>,
+    /// Every face fanned into triangles, in the order the faces appear: three
+    /// indices into `positions` per triangle.
+    pub indices: Vec<u32>,
     /// Per triangle, the index into `usemtl_names` of the `usemtl` in force, or `NO_USEMTL`.
     pub usemtl: Vec<u32>,
     /// The distinct names given to `usemtl`, in order of first use.
     pub usemtl_names: Vec<String>,
     /// The `mtllib` arguments with their (1-based) lines.
     pub mtllibs: Vec<(String, usize)>,
+}
+
+impl ObjFile {
+    /// Triangles of the faces.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// The triangles' corners (tests).
+    #[cfg(test)]
+    fn triangles(&self) -> Vec<[Vec3; 3]> {
+        self.indices.chunks(3).map(|t| [0, 1, 2].map(|k| self.positions[t[k] as usize])).collect()
+    }
 }
 
 /// The rest of a statement after its keyword, trimmed (names may contain spaces).
@@ -128,8 +146,11 @@ pub(crate) fn parse_obj(path: &Path, bytes: &[u8]) -> Result<ObjFile> {
                     }
                 }
                 // Fan: (a0, a1, a2), (a0, a2, a3), ...
+                let index = |k: usize| {
+                    u32::try_from(face[k]).map_err(|_| err(format!("vertex {} is past 2^32 vertices", face[k] + 1)))
+                };
                 for k in 1..face.len() - 1 {
-                    obj.triangles.push([positions[face[0]], positions[face[k]], positions[face[k + 1]]]);
+                    obj.indices.extend([index(0)?, index(k)?, index(k + 1)?]);
                     obj.usemtl.push(current);
                 }
             }
@@ -162,9 +183,10 @@ pub(crate) fn parse_obj(path: &Path, bytes: &[u8]) -> Result<ObjFile> {
             _ => return Err(err(format!("not an OBJ statement: {}", quote(keyword)))),
         }
     }
-    if obj.triangles.len() >= crate::consts::PRIM_INCOMPLETE as usize {
-        return Err(scene_error(path, None, format!("too many triangles ({})", obj.triangles.len())));
+    if obj.triangle_count() >= crate::consts::PRIM_INCOMPLETE as usize {
+        return Err(scene_error(path, None, format!("too many triangles ({})", obj.triangle_count())));
     }
+    obj.positions = positions;
     Ok(obj)
 }
 
@@ -274,7 +296,7 @@ mod tests {
         let text = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nv 4 0 0\n\
                     f 1 2 3 4 5\nf 5 4 3\nf 2 3 4 5\n";
         let obj = parse(text).unwrap();
-        let x: Vec<[f32; 3]> = obj.triangles.iter().map(|t| [t[0].x, t[1].x, t[2].x]).collect();
+        let x: Vec<[f32; 3]> = obj.triangles().iter().map(|t| [t[0].x, t[1].x, t[2].x]).collect();
         let want = [[0., 1., 2.], [0., 2., 3.], [0., 3., 4.], [4., 3., 2.], [1., 2., 3.], [1., 3., 4.]];
         assert_eq!(x, want);
     }
@@ -284,8 +306,8 @@ mod tests {
         let text = "v 0 0 0\nv 1 0 0\nv 2 0 0\nvt 0 0\nvn 0 0 1\n\
                     f 1/1 2/1 3/1\nf 1//1 2//1 3//1\nf 1/1/1 2/1/1 3/1/1\nf -3 -2 -1\nf -3/-1/-1 2 3 # comment\n";
         let obj = parse(text).unwrap();
-        assert_eq!(obj.triangles.len(), 5);
-        for t in &obj.triangles {
+        assert_eq!(obj.triangle_count(), 5);
+        for t in &obj.triangles() {
             assert_eq!([t[0].x, t[1].x, t[2].x], [0., 1., 2.]);
         }
     }
@@ -293,7 +315,7 @@ mod tests {
     #[test]
     fn homogeneous_and_coloured_vertices() {
         let obj = parse("v 2 4 6 2\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0\nf 1 2 3\n").unwrap();
-        assert_eq!(obj.triangles[0][0], Vec3::new(1., 2., 3.));
+        assert_eq!(obj.triangles()[0][0], Vec3::new(1., 2., 3.));
     }
 
     #[test]
@@ -310,7 +332,7 @@ mod tests {
     fn skips_other_statements_and_crlf() {
         let text =
             "\u{feff}# c\r\no a\r\ng b c\r\ns 1\r\nl 1 2 3\r\np 1\r\nv 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n";
-        assert_eq!(parse(text).unwrap().triangles.len(), 1);
+        assert_eq!(parse(text).unwrap().triangle_count(), 1);
     }
 
     #[test]
@@ -350,7 +372,7 @@ mod tests {
 
     #[test]
     fn unused_non_finite_vertex_is_fine() {
-        assert_eq!(parse("v nan 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 2 3 4\n").unwrap().triangles.len(), 1);
+        assert_eq!(parse("v nan 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 2 3 4\n").unwrap().triangle_count(), 1);
     }
 
     #[test]
