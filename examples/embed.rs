@@ -242,17 +242,11 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
             bytemuck::bytes_of(&shade_params),
         );
         device.cmd_dispatch(cmd, groups, 1, 1);
-        let to_host = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ);
-        device.cmd_pipeline_barrier(
+        memory_barrier(
+            device,
             cmd,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::PipelineStageFlags::HOST,
-            vk::DependencyFlags::empty(),
-            &[to_host],
-            &[],
-            &[],
+            (vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_WRITE),
+            (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
         );
         device.end_command_buffer(cmd).context("vkEndCommandBuffer")?;
         binding
@@ -282,20 +276,24 @@ fn render_frame(engine: &Engine, path: &Path, width: u32, height: u32) -> Result
 /// # Safety
 /// `cmd` is recording outside a render pass.
 pub unsafe fn compute_barrier(device: &ash::Device, cmd: vk::CommandBuffer, dst_access: vk::AccessFlags) {
-    let barrier =
-        vk::MemoryBarrier::default().src_access_mask(vk::AccessFlags::SHADER_WRITE).dst_access_mask(dst_access);
+    let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
     // SAFETY: forwarded from the caller.
-    unsafe {
-        device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            vk::DependencyFlags::empty(),
-            &[barrier],
-            &[],
-            &[],
-        );
-    }
+    unsafe { memory_barrier(device, cmd, (compute, vk::AccessFlags::SHADER_WRITE), (compute, dst_access)) };
+}
+
+/// A global memory barrier from `src` (stages, accesses) to `dst`.
+///
+/// # Safety
+/// `cmd` is recording outside a render pass.
+pub unsafe fn memory_barrier(
+    device: &ash::Device,
+    cmd: vk::CommandBuffer,
+    src: (vk::PipelineStageFlags, vk::AccessFlags),
+    dst: (vk::PipelineStageFlags, vk::AccessFlags),
+) {
+    let barrier = vk::MemoryBarrier::default().src_access_mask(src.1).dst_access_mask(dst.1);
+    // SAFETY: forwarded from the caller.
+    unsafe { device.cmd_pipeline_barrier(cmd, src.0, dst.0, vk::DependencyFlags::empty(), &[barrier], &[], &[]) };
 }
 
 /// The engine's device: instance (with the validation layer when asked), one

@@ -41,7 +41,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use ash::vk;
 use embed::abi::*;
-use embed::{align_up, compute_barrier, Engine, Resources};
+use embed::{align_up, compute_barrier, memory_barrier, Engine, Resources};
 use glam::{Affine3A, Mat3, Quat, Vec3};
 use gpu_allocator::MemoryLocation;
 use kdtrace::gpu::{shaders, BufferRange, Validation};
@@ -138,13 +138,12 @@ impl Meshes {
     /// Mesh `id` as a kdtrace geometry, read from the interleaved vertex bytes.
     fn geometry(&self, id: u32) -> Result<Geometry<'_>> {
         let bytes: &[u8] = bytemuck::cast_slice(&self.vertices);
-        let mesh = self.meshes[id as usize];
-        let (count, indices) = match id {
-            SPHERE => (mesh_vertices(self, id), Indices::U32(&self.sphere_indices)),
-            _ => (mesh_vertices(self, id), Indices::U16(&self.ground_indices)),
-        };
-        let offset = mesh.first_vertex as usize * std::mem::size_of::<[f32; 6]>();
-        Ok(Geometry::strided(id, bytes, offset, std::mem::size_of::<[f32; 6]>(), count)?.with_indices(indices))
+        let stride = std::mem::size_of::<[f32; 6]>();
+        let first = self.meshes[id as usize].first_vertex as usize;
+        let end = self.meshes.get(id as usize + 1).map_or(self.vertices.len(), |m| m.first_vertex as usize);
+        let indices =
+            if id == SPHERE { Indices::U32(&self.sphere_indices) } else { Indices::U16(&self.ground_indices) };
+        Ok(Geometry::strided(id, bytes, first * stride, stride, end - first)?.with_indices(indices))
     }
 }
 
@@ -152,13 +151,6 @@ impl Default for Meshes {
     fn default() -> Self {
         Meshes::new()
     }
-}
-
-/// Vertices of mesh `id`.
-fn mesh_vertices(meshes: &Meshes, id: u32) -> usize {
-    let first = meshes.meshes[id as usize].first_vertex as usize;
-    let end = meshes.meshes.get(id as usize + 1).map_or(meshes.vertices.len(), |m| m.first_vertex as usize);
-    end - first
 }
 
 /// One placement of a mesh in the engine's scene graph.
@@ -428,31 +420,20 @@ fn render_frames(
             device.cmd_push_constants(cmd, shade.layout, stages, 0, bytemuck::bytes_of(&shade_params));
             device.cmd_dispatch(cmd, groups, 1, 1);
             // The rays and hits to the readback buffer (transfer), the pixels to the host.
-            let to_copy = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_READ);
-            device.cmd_pipeline_barrier(
+            let (shader, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
+            memory_barrier(
+                device,
                 cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &[to_copy],
-                &[],
-                &[],
+                (shader, vk::AccessFlags::SHADER_WRITE),
+                (transfer, vk::AccessFlags::TRANSFER_READ),
             );
             let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: traced_bytes }];
             device.cmd_copy_buffer(cmd, traced, readback, &region);
-            let to_host = vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ);
-            device.cmd_pipeline_barrier(
+            memory_barrier(
+                device,
                 cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[to_host],
-                &[],
-                &[],
+                (shader | transfer, vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE),
+                (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
             );
             device.end_command_buffer(cmd).context("vkEndCommandBuffer")?;
             binding
