@@ -5,22 +5,25 @@
 //! execution paths with no memory access and no arithmetic ran as long as the
 //! real one, so the GPU was bound by divergent control flow. Here:
 //!
-//! - [`record`]: the CPU twin of `stack` traces each ray and writes its control
-//!   flow as a compact record — per visit of a leaf that tested triangles, the
-//!   descent steps before it and the triangles it tested (one `u32`, 16 bits
-//!   each), plus an offset per ray. The twin takes the kernel's decisions bit for
-//!   bit (`tests/gpu_trace.rs`), so these are the GPU lanes' loop trip counts.
+//! - [`record`]: a CPU twin of the traversal traces each ray and writes its
+//!   control flow as a compact record — per leaf visit that tested triangles,
+//!   the loop steps before it and the triangles it tested (one `u32`, 16 bits
+//!   each), plus an offset per ray — and, apart, the index of every node it
+//!   fetched. The twins take the kernels' decisions bit for bit
+//!   (`tests/gpu_trace.rs`; packets: `tests/packets.rs`), so these are the GPU
+//!   lanes' loop trip counts. Every variant has a single-ray twin, and every
+//!   packet variant a packet twin, whose lanes' rounds are aligned: one per leaf
+//!   step of the packet, the steps counted per packet step (a robust lane that
+//!   finishes alone with exact restarts then adds its own rounds).
 //! - [`replay`]: `glsl/divergence_replay.comp` runs those loops lane by lane —
 //!   the same rounds, the same trip counts in each — with one integer
-//!   multiply-add per step instead of node fetches and intersection tests, and a
-//!   second time reading only the records (their own cost).
+//!   multiply-add per step instead of node fetches and intersection tests; then
+//!   the **memory-only** kernel, which makes the same node fetches (and the
+//!   triangle fetches of the leaves a lane tested) in the same order from the
+//!   fetch record, with no decision; and each record read alone (their own cost).
 //! - [`simd_efficiency`]: the share of a subgroup's lanes busy in each stage
 //!   when its lanes run these loops in lockstep (a subgroup's round lasts as long
 //!   as its longest lane's; finished lanes idle).
-//!
-//! Not reproduced: a memory-only kernel (the same fetches without the
-//! decisions' arithmetic), which needs the visited node and triangle indices in
-//! the records (about 10× their size); other traversal variants than `stack`.
 
 use std::sync::Arc;
 
@@ -31,24 +34,32 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::kdtree::traverse::{trace_ray_logged, SceneRef};
+use crate::kdtree::links::TreeLinks;
+use crate::kdtree::traverse::{trace_packet_logged, trace_ray_logged, FlowLog, SceneRef};
 use crate::kdtree::KdTree;
 use crate::traversal::{Traversal, Variant};
 
-/// The control flow of a batch of rays in the `stack` traversal.
+/// The control flow and node fetches of a batch of rays in one traversal.
 #[derive(Clone, Debug, Default)]
 pub struct Records {
     /// Ray i's words are `words[offsets[i]..offsets[i + 1]]`.
     pub offsets: Vec<u32>,
-    /// Per leaf visit that tested triangles: descent steps before it (low 16
+    /// Per leaf visit that tested triangles: loop steps before it (low 16
     /// bits) and triangles tested (high 16 bits); a last word of trailing steps.
     pub words: Vec<u32>,
+    /// Ray i's fetches are `fetches[fetch_offsets[i]..fetch_offsets[i + 1]]`.
+    pub fetch_offsets: Vec<u32>,
+    /// Node index per fetch, [`FlowLog::TESTED`] set on a leaf whose triangles
+    /// the ray tested (the memory-only kernel's input).
+    pub fetches: Vec<u32>,
     /// Nodes, leaf visits (with triangles) and triangle tests, summed over the rays.
     pub nodes: u64,
     /// See `nodes`.
     pub leaves: u64,
     /// See `nodes`.
     pub triangles: u64,
+    /// Packet steps summed over the lanes (packets only: a lane steps with its packet).
+    pub steps: u64,
     /// Trip counts above 65,535, clamped in the record.
     pub clamped: u64,
 }
@@ -59,48 +70,76 @@ impl Records {
         self.offsets.len().saturating_sub(1)
     }
 
-    /// Bytes on the device: the offsets and the words.
+    /// Bytes on the device of the control-flow record: the offsets and the words.
     pub fn bytes(&self) -> u64 {
         4 * (self.offsets.len() + self.words.len()) as u64
     }
 
-    /// Ray `i`'s `(descent steps, triangles)` per round.
+    /// Bytes on the device of the fetch record.
+    pub fn fetch_bytes(&self) -> u64 {
+        4 * (self.fetch_offsets.len() + self.fetches.len()) as u64
+    }
+
+    /// Ray `i`'s `(loop steps, triangles)` per round.
     pub fn rounds(&self, i: usize) -> impl Iterator<Item = (u32, u32)> + '_ {
         let (a, b) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
         self.words[a..b].iter().map(|w| (w & 0xffff, w >> 16))
     }
-}
 
-/// Records the control flow of `rays` in the `stack` traversal of `traversal`
-/// (its robustness and any-hit settings; the variant must be `Stack`).
-pub fn record(tree: &KdTree, triangles: &[[Vec3; 3]], rays: &[Ray], traversal: Traversal) -> Result<Records> {
-    if traversal.variant != Variant::Stack {
-        return Err(Error::InvalidInput(format!(
-            "divergence records exist for the stack traversal only, not {:?}",
-            traversal.variant
-        )));
-    }
-    let scene = SceneRef::new(tree, triangles);
-    let logs: Vec<(Vec<[u32; 2]>, u64, u64, u64)> = rays
-        .par_iter()
-        .map(|ray| {
-            let mut log = Vec::new();
-            let (_, c) = trace_ray_logged(&scene, ray, traversal, &mut log);
-            (log, u64::from(c.nodes), u64::from(c.leaves), u64::from(c.triangles))
-        })
-        .collect();
-    let mut out = Records { offsets: Vec::with_capacity(rays.len() + 1), ..Default::default() };
-    out.offsets.push(0);
-    for (log, nodes, leaves, tris) in logs {
-        for [d, t] in log {
-            out.clamped += u64::from(d > 0xffff) + u64::from(t > 0xffff);
-            out.words.push(d.min(0xffff) | (t.min(0xffff) << 16));
+    fn push(&mut self, log: &FlowLog) -> Result<()> {
+        for &[d, t] in &log.rounds {
+            self.clamped += u64::from(d > 0xffff) + u64::from(t > 0xffff);
+            self.words.push(d.min(0xffff) | (t.min(0xffff) << 16));
         }
-        if out.words.len() > u32::MAX as usize {
+        self.fetches.extend_from_slice(&log.fetches);
+        if self.words.len() > u32::MAX as usize || self.fetches.len() > u32::MAX as usize {
             return Err(Error::InvalidInput("too many rays for one divergence record".into()));
         }
-        out.offsets.push(out.words.len() as u32);
-        (out.nodes, out.leaves, out.triangles) = (out.nodes + nodes, out.leaves + leaves, out.triangles + tris);
+        self.offsets.push(self.words.len() as u32);
+        self.fetch_offsets.push(self.fetches.len() as u32);
+        Ok(())
+    }
+}
+
+/// Records the control flow of `rays` in `traversal` (its variant, robustness,
+/// any-hit and packet width), as the GPU runs them
+/// unordered: packet p holds rays `p·w .. p·w + w`.
+pub fn record(tree: &KdTree, triangles: &[[Vec3; 3]], rays: &[Ray], traversal: Traversal) -> Result<Records> {
+    let width = traversal.packet_width.max(1) as usize;
+    if width > 1 && matches!(traversal.variant, Variant::Backtrack | Variant::Ropes) {
+        return Err(Error::InvalidInput(format!("{:?} has no packet kernel", traversal.variant)));
+    }
+    let links = matches!(traversal.variant, Variant::Backtrack | Variant::Ropes)
+        .then(|| TreeLinks::new(&tree.nodes, tree.bounds));
+    let mut scene = SceneRef::new(tree, triangles);
+    if let Some(l) = &links {
+        scene = scene.with_links(l);
+    }
+    let logs: Vec<(FlowLog, [u64; 4])> = rays
+        .par_chunks(width)
+        .flat_map_iter(|packet| {
+            let mut logs = vec![FlowLog::default(); packet.len()];
+            let counters: Vec<_> = if width > 1 {
+                let out = trace_packet_logged(&scene, packet, traversal, Some(&mut logs));
+                out.expect("a packet twin of every packet variant").into_iter().map(|(_, c)| c).collect()
+            } else {
+                vec![trace_ray_logged(&scene, &packet[0], traversal, &mut logs[0]).1]
+            };
+            logs.into_iter().zip(counters).map(|(log, c)| {
+                let counts = [c.nodes, c.leaves, c.triangles, c.steps].map(u64::from);
+                (log, counts)
+            })
+        })
+        .collect();
+    let mut out = Records { offsets: vec![0], fetch_offsets: vec![0], ..Default::default() };
+    out.offsets.reserve(rays.len());
+    out.fetch_offsets.reserve(rays.len());
+    for (log, [nodes, leaves, tris, steps]) in &logs {
+        out.push(log)?;
+        out.nodes += nodes;
+        out.leaves += leaves;
+        out.triangles += tris;
+        out.steps += if width > 1 { *steps } else { 0 };
     }
     Ok(out)
 }
@@ -151,39 +190,65 @@ pub fn simd_efficiency(records: &Records, lanes: usize) -> Efficiency {
     }
 }
 
-/// GPU seconds of the replay kernel and of the records' read alone (medians).
+/// GPU seconds of the replay and memory-only kernels and of their records'
+/// reads alone (medians).
 #[derive(Clone, Copy, Debug)]
 pub struct ReplayTimes {
     /// The control flow replayed.
     pub replay_s: f64,
-    /// The records read and summed, no loops.
+    /// The control-flow records read and summed, no loops.
     pub read_s: f64,
+    /// The node and triangle fetches made, no decisions.
+    pub memory_s: f64,
+    /// The fetch records read and summed, no fetches.
+    pub memory_read_s: f64,
 }
 
 /// Runs `glsl/divergence_replay.comp` over `records` on `ctx`'s device,
-/// `repeat` times after a warm-up, in both modes. `None` without timestamps.
-pub fn replay(ctx: &Arc<GpuContext>, records: &Records, repeat: usize) -> Result<Option<ReplayTimes>> {
+/// `repeat` times after a warm-up, in its four modes; the memory-only mode
+/// fetches from a copy of the tracer's node and triangle texels of `tree`.
+/// `None` without timestamps.
+pub fn replay(
+    ctx: &Arc<GpuContext>,
+    tree: &KdTree,
+    triangles: &[[Vec3; 3]],
+    records: &Records,
+    repeat: usize,
+) -> Result<Option<ReplayTimes>> {
     let n = records.rays() as u32;
     let Some(timestamps) = Timestamps::new(ctx, 2)? else { return Ok(None) };
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-    let offsets = Buffer::with_data(ctx, bytemuck::cast_slice(&records.offsets), storage, "divergence offsets")?;
-    let words = Buffer::with_data(ctx, bytemuck::cast_slice(&records.words), storage, "divergence records")?;
+    let texel = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
+    let upload = |words: &[u32], what: &str| -> Result<Buffer> {
+        // A zero-sized buffer cannot be made: one word more.
+        let data = if words.is_empty() { &[0u32][..] } else { words };
+        Buffer::with_data(ctx, bytemuck::cast_slice(data), storage, what)
+    };
+    let offsets = upload(&records.offsets, "divergence offsets")?;
+    let words = upload(&records.words, "divergence records")?;
+    let fetch_offsets = upload(&records.fetch_offsets, "divergence fetch offsets")?;
+    let fetches = upload(&records.fetches, "divergence fetches")?;
+    let nodes = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), texel, "divergence nodes")?;
+    let tri_texels = crate::trace::scene::triangle_texels(tree, triangles);
+    let tris = Buffer::with_data(ctx, bytemuck::cast_slice(&tri_texels), texel, "divergence triangles")?;
     let sink =
         Buffer::new(ctx, 4 * u64::from(n.max(1)), storage, gpu_allocator::MemoryLocation::GpuOnly, "divergence sink")?;
-    let median = |read_only: bool| -> Result<f64> {
+    let median = |mode: u32| -> Result<f64> {
         let kernel = Kernel::new(
             ctx,
             &KernelDesc {
                 name: "divergence_replay",
                 spirv: shaders::DIVERGENCE_REPLAY,
-                bindings: 3,
+                bindings: 5,
+                texel_buffers: &[(3, vk::Format::R32G32_UINT), (4, vk::Format::R32G32B32A32_UINT)],
                 push_constant_size: 4,
-                spec_constants: &[u32::from(read_only)],
+                spec_constants: &[mode],
                 workgroup_size: 64,
                 ..Default::default()
             },
         )?;
-        let set = BufferSet::new(ctx, &kernel, &[&offsets, &words, &sink])?;
+        let (o, w) = if mode < 2 { (&offsets, &words) } else { (&fetch_offsets, &fetches) };
+        let set = BufferSet::new(ctx, &kernel, &[o, w, &sink, &nodes, &tris])?;
         let mut times = Vec::new();
         for _ in 0..=repeat.max(1) {
             ctx.submit_and_wait(|cmd| {
@@ -201,9 +266,7 @@ pub fn replay(ctx: &Arc<GpuContext>, records: &Records, repeat: usize) -> Result
         times.sort_by(f64::total_cmp);
         Ok(times[times.len() / 2])
     };
-    let replay_s = median(false)?;
-    let read_s = median(true)?;
-    Ok(Some(ReplayTimes { replay_s, read_s }))
+    Ok(Some(ReplayTimes { replay_s: median(0)?, read_s: median(1)?, memory_s: median(2)?, memory_read_s: median(3)? }))
 }
 
 #[cfg(test)]
@@ -255,6 +318,10 @@ mod tests {
         assert_eq!(steps + visits, r.nodes);
         assert_eq!(tested, r.triangles);
         assert!(visits <= r.leaves && r.triangles > 0);
-        assert!(record(&tree, &tris, &rays, Traversal::closest(Variant::Restart)).is_err());
+        // The fetch record: one word per node fetch, a tested flag per leaf visit with triangles.
+        assert_eq!(r.fetches.len() as u64, r.nodes);
+        assert_eq!(r.fetches.iter().filter(|&&f| f & FlowLog::TESTED != 0).count() as u64, visits);
+        let packets = Traversal { packet_width: 4, ..Traversal::closest(Variant::Ropes) };
+        assert!(record(&tree, &tris, &rays, packets).is_err(), "no packet kernel of ropes");
     }
 }

@@ -538,9 +538,10 @@ fn subgroups_writes_table_csv_and_chart() {
     assert!(image::open(&png).unwrap().width() > 100);
 }
 
-/// `divergence`: the real kernel, the replay of its control flow and the
-/// records' read, timed per scene and kind, with per-stage SIMD efficiency in
-/// (0, 1] and the twin's counters; other variants are refused with a message.
+/// `divergence`: the real kernel, the replay of its control flow, the
+/// memory-only kernel and the records' reads, timed per scene, kind, traversal
+/// and packet width, with per-stage SIMD efficiency in (0, 1] and the twins'
+/// counters; a variant without packets is refused with a message.
 #[test]
 fn divergence_writes_table_csv_and_chart() {
     let (csv, png) = (temp("divergence.csv"), temp("divergence.png"));
@@ -548,6 +549,10 @@ fn divergence_writes_table_csv_and_chart() {
     let o = kdtrace(&[
         "divergence",
         scene.to_str().unwrap(),
+        "--traversal",
+        "stack,short-stack",
+        "--packet-width",
+        "1,4",
         "--width",
         "32",
         "--height",
@@ -567,22 +572,46 @@ fn divergence_writes_table_csv_and_chart() {
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"));
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 2, "{text}");
+    // 2 kinds × 2 traversals × 2 widths.
+    assert_eq!(rows.len(), 8, "{text}");
+    let num = |row: &Vec<&str>, name: &str| row[col(name)].parse::<f64>().unwrap();
     for row in &rows {
-        let num = |name: &str| row[col(name)].parse::<f64>().unwrap();
-        assert!(num("real_s") > 0.0 && num("replay_s") > 0.0 && num("records_read_s") > 0.0, "{text}");
-        for e in ["simd_descent", "simd_leaf", "simd_overall"] {
-            assert!(num(e) > 0.0 && num(e) <= 1.0, "{e}: {text}");
+        for t in ["real_s", "replay_s", "records_read_s", "memory_s", "fetches_read_s"] {
+            assert!(num(row, t) > 0.0, "{t}: {text}");
         }
-        assert!(num("nodes_per_ray") > 1.0 && num("record_bytes") > 0.0, "{text}");
+        for e in ["simd_descent", "simd_leaf", "simd_overall", "packet_active"] {
+            assert!(num(row, e) > 0.0 && num(row, e) <= 1.0, "{e}: {text}");
+        }
+        assert!(num(row, "nodes_per_ray") > 1.0 && num(row, "record_bytes") > 0.0, "{text}");
+        // Single rays: one fetch word per node visit, an offset per ray.
+        let rays = num(row, "rays");
+        if row[col("packet_width")] == "1" {
+            let words = (num(row, "nodes_per_ray") * rays).round() + rays + 1.0;
+            assert!((num(row, "fetch_bytes") - 4.0 * words).abs() <= 4.0 * rays * 1e-3, "{text}");
+        }
+        // Single rays are active in every step of their own; packet lanes in some.
+        assert_eq!(num(row, "packet_active") == 1.0, row[col("packet_width")] == "1", "{text}");
     }
-    assert_eq!(rows[0][col("kind")], "camera");
+    let find = |kind: &str, traversal: &str, w: &str| {
+        rows.iter()
+            .find(|r| r[col("kind")] == kind && r[col("traversal")] == traversal && r[col("packet_width")] == w)
+            .unwrap_or_else(|| panic!("no row {kind} {traversal} {w}: {text}"))
+    };
     // Random rays diverge more than camera rays.
-    let eff = |r: &Vec<&str>| r[col("simd_overall")].parse::<f64>().unwrap();
-    assert!(eff(&rows[1]) < eff(&rows[0]), "{text}");
+    assert!(num(find("random", "stack", "1"), "simd_overall") < num(find("camera", "stack", "1"), "simd_overall"));
+    assert!(num(find("random", "stack", "4"), "packet_active") < num(find("camera", "stack", "4"), "packet_active"));
     assert!(image::open(&png).unwrap().width() > 100);
-    let o = kdtrace(&["divergence", scene.to_str().unwrap(), "--traversal", "restart", "--csv", csv.to_str().unwrap()]);
-    assert!(!o.status.success() && stderr(&o).contains("stack traversal only"), "{}", stderr(&o));
+    let o = kdtrace(&[
+        "divergence",
+        scene.to_str().unwrap(),
+        "--traversal",
+        "ropes",
+        "--packet-width",
+        "4",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("no packet kernel"), "{}", stderr(&o));
 }
 
 /// `--builder` picks the split search on `trace` (and `stats`): each tree's

@@ -2,13 +2,14 @@
 //! subgroup allows, returns the same hit as single-ray traversal (the CPU twin) for every ray
 //! (the same t bit for bit; another primitive only in an exact tie). Run at the
 //! device's subgroup size, and on lavapipe again at 4 lanes in a child process
-//! with `LP_NATIVE_VECTOR_WIDTH=128`.
+//! with `LP_NATIVE_VECTOR_WIDTH=128`. The packet twins (`trace_packet_logged`)
+//! give the kernels' hits and per-lane counters bit for bit.
 
 mod common;
 
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use kdtrace::geom::WatertightRay;
-use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
+use kdtrace::kdtree::traverse::{trace_packet_logged, trace_ray, Counters, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::render::camera_rays_morton;
 use kdtrace::scene::{Camera, Scene};
@@ -43,6 +44,7 @@ fn check_scene(tracer: &mut Tracer, tree: &KdTree, scene: &Scene, rays: &[Ray], 
                         .unwrap_or_else(|why| panic!("{name} {traversal:?} ray {i} {:?}: {why}", rays[i]));
                 }
                 let counters = result.counters.unwrap();
+                check_packet_twin(&scene_ref, rays, traversal, &result.hits, &counters, name);
                 let active: u64 = counters.iter().map(|c| c.nodes as u64).sum();
                 let steps: u64 = counters.iter().map(|c| c.steps as u64).sum();
                 assert!(active <= steps, "a lane is active in at most every step of its packet");
@@ -55,6 +57,52 @@ fn check_scene(tracer: &mut Tracer, tree: &KdTree, scene: &Scene, rays: &[Ray], 
             }
         }
     }
+}
+
+/// The packet twins (`trace_packet_logged`, the records of `kdtrace divergence`)
+/// take the kernels' decisions: the same hits and per-lane counters, bit for bit.
+fn check_packet_twin(
+    scene: &SceneRef,
+    rays: &[Ray],
+    traversal: Traversal,
+    hits: &[Hit],
+    counters: &[Counters],
+    name: &str,
+) {
+    let w = traversal.packet_width as usize;
+    let bits = |h: &Hit| (h.t.to_bits(), h.prim_id, h.u.to_bits(), h.v.to_bits());
+    let count = |c: &Counters| (c.nodes, c.leaves, c.triangles, c.steps, c.restarts, c.drops);
+    for (p, chunk) in rays.chunks(w).enumerate() {
+        let twin = trace_packet_logged(scene, chunk, traversal, None).unwrap();
+        for (k, (hit, c)) in twin.iter().enumerate() {
+            let i = p * w + k;
+            assert_eq!(bits(hit), bits(&hits[i]), "{name} {traversal:?} ray {i}: twin {hit:?}, GPU {:?}", hits[i]);
+            assert_eq!(count(c), count(&counters[i]), "{name} {traversal:?} ray {i}: counters");
+        }
+    }
+}
+
+/// The plain packet kernels (t-value restarts, no exact fallback) against their twins.
+#[test]
+fn packet_twins_match_the_plain_kernels() {
+    let ctx = context();
+    let widths: Vec<u32> = [4, 8].into_iter().filter(|&w| w <= ctx.info.subgroup_size).collect();
+    let scene = Scene::load(&scene_path("teapot.obj")).unwrap();
+    let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "teapot").unwrap().unwrap();
+    let (mut rays, _) = camera_rays_morton(&camera, 32, 24);
+    rays.extend(random_rays(&mut Rng(5), scene.bounds.min, scene.bounds.max, 800));
+    let scene_ref = SceneRef::new(&tree, &scene.triangles);
+    for (variant, stack_size) in PACKET_VARIANTS {
+        for &packet_width in &widths {
+            let traversal = Traversal { packet_width, stack_size, robust: false, ..Traversal::closest(variant) };
+            let result = tracer.trace(&rays, &TraceOptions::counted(traversal)).unwrap();
+            check_packet_twin(&scene_ref, &rays, traversal, &result.hits, &result.counters.unwrap(), "teapot");
+        }
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
 }
 
 fn check_hit(

@@ -136,7 +136,7 @@ pub use crate::abi::TraceParams;
 mod binding;
 mod options;
 mod pipelines;
-mod scene;
+pub(crate) mod scene;
 
 pub use binding::TraceBinding;
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};

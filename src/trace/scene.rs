@@ -51,15 +51,7 @@ impl SceneBuffers {
         tree.check(triangles.len()).map_err(|e| {
             Error::InvalidInput(format!("the kd-tree does not fit its {} triangles: {e}", triangles.len()))
         })?;
-        // Triangle texels (R32G32B32A32_UINT) in prim_indices order, so a leaf's
-        // triangles are contiguous and need no index load: (v0, prim), (v1, 0), (v2, 0).
-        // Filled in parallel: one 48-byte record per reference, a million on a big scene.
-        use rayon::prelude::*;
-        let mut tri_texels = vec![[0u32; 4]; 3 * tree.prim_indices.len()];
-        tri_texels.par_chunks_mut(3).zip(tree.prim_indices.par_iter()).for_each(|(out, &p)| {
-            let [a, b, c] = triangles[p as usize].map(|v| v.to_array().map(f32::to_bits));
-            out.copy_from_slice(&[[a[0], a[1], a[2], p], [b[0], b[1], b[2], 0], [c[0], c[1], c[2], 0]]);
-        });
+        let tri_texels = triangle_texels(tree, triangles);
         let limit = ctx.info.max_storage_buffer_range;
         let bytes = std::mem::size_of_val(tree.prim_indices.as_slice());
         if bytes as u64 > limit {
@@ -89,6 +81,19 @@ impl SceneBuffers {
             links: None,
         })
     }
+}
+
+/// The triangle texels (R32G32B32A32_UINT) in `prim_indices` order, so a
+/// leaf's triangles are contiguous and need no index load: (v0, prim), (v1, 0),
+/// (v2, 0) per reference. Filled in parallel: a million references on a big scene.
+pub(crate) fn triangle_texels(tree: &KdTree, triangles: &[[Vec3; 3]]) -> Vec<[u32; 4]> {
+    use rayon::prelude::*;
+    let mut tri_texels = vec![[0u32; 4]; 3 * tree.prim_indices.len()];
+    tri_texels.par_chunks_mut(3).zip(tree.prim_indices.par_iter()).for_each(|(out, &p)| {
+        let [a, b, c] = triangles[p as usize].map(|v| v.to_array().map(f32::to_bits));
+        out.copy_from_slice(&[[a[0], a[1], a[2], p], [b[0], b[1], b[2], 0], [c[0], c[1], c[2], 0]]);
+    });
+    tri_texels
 }
 
 /// Bytes a [`Tracer`](super::Tracer) uploads for a kd-tree scene (before the side buffers of

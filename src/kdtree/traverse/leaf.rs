@@ -45,7 +45,11 @@ impl State<'_, '_> {
     /// leaf's segment (which ends at `t1`).
     pub(super) fn leaf(&mut self, n: KdNode, t1: f32) -> bool {
         self.c.leaves += 1;
+        let tested = self.c.triangles;
         intersect_leaf(self.scene, self.r, n, &mut self.best, self.c);
+        if let Some(log) = self.log.as_mut() {
+            log.tested(self.c.triangles - tested);
+        }
         if self.r.any_hit {
             self.best.hit.prim_id != PRIM_MISS
         } else {

@@ -11,6 +11,7 @@ mod boxes;
 mod decide;
 mod leaf;
 mod node;
+mod packet;
 mod push_down;
 mod restart;
 mod ropes;
@@ -69,88 +70,228 @@ pub fn trace_ray(scene: &SceneRef, ray: &Ray, traversal: impl Into<Traversal>) -
     trace_ray_inner(scene, ray, traversal.into(), None)
 }
 
-/// [`trace_ray`] with the `stack` traversal's control flow appended to `log`:
-/// per visit of a leaf that tested triangles, `[interior nodes (and empty
-/// leaves) stepped through since the previous such leaf, triangles tested]`, and
-/// a last `[steps, 0]` for steps after the last one. The per-lane loop trip
-/// counts of the kernel's descent and leaf loops, for `kdtrace divergence`.
-/// Other variants log nothing.
+/// [`trace_ray`] with the ray's control flow and node fetches appended to `log`
+/// ([`FlowLog`]), for `kdtrace divergence`. Every single-ray variant logs.
 pub fn trace_ray_logged(
     scene: &SceneRef,
     ray: &Ray,
     traversal: impl Into<Traversal>,
-    log: &mut Vec<[u32; 2]>,
+    log: &mut FlowLog,
 ) -> (Hit, Counters) {
     trace_ray_inner(scene, ray, traversal.into(), Some(log))
 }
 
-fn trace_ray_inner(
+/// Traces one packet, the rays of consecutive lanes, as the GPU's packet kernel
+/// of `traversal` does (`glsl/traverse/packet_stack.glsl` for `Stack`,
+/// `packet_short_stack.glsl` for `Restart`, `PushDown` and the short stacks):
+/// decisions by ballot over the packet. With `logs` (one per ray) each lane's
+/// control flow is appended as in [`trace_ray_logged`]. Hits and counters equal
+/// the GPU's bit for bit (tests/packets.rs). `None` for `Backtrack` and `Ropes`,
+/// which have no packet kernel.
+pub fn trace_packet_logged(
     scene: &SceneRef,
-    ray: &Ray,
+    rays: &[Ray],
     traversal: Traversal,
-    log: Option<&mut Vec<[u32; 2]>>,
-) -> (Hit, Counters) {
+    logs: Option<&mut [FlowLog]>,
+) -> Option<Vec<(Hit, Counters)>> {
+    let size = match traversal.variant {
+        Variant::Stack => None,
+        Variant::Restart | Variant::PushDown => Some(0),
+        Variant::ShortStack | Variant::PushDownShortStack => {
+            Some(traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize)
+        }
+        Variant::Backtrack | Variant::Ropes => return None,
+    };
+    let setups: Vec<RaySetup> = rays.iter().map(|ray| setup_ray(scene, ray, traversal)).collect();
+    let mut logs: Vec<Option<&mut FlowLog>> = match logs {
+        Some(l) => l.iter_mut().map(Some).collect(),
+        None => rays.iter().map(|_| None).collect(),
+    };
+    let mut lanes: Vec<packet::Lane> = setups
+        .iter()
+        .zip(logs.iter_mut())
+        .map(|(s, log)| {
+            let (t0, t1) = s.clipped.unwrap_or((0.0, 0.0));
+            packet::Lane {
+                r: s.r.clone(),
+                alive: s.clipped.is_some(),
+                t0,
+                t1,
+                best: Closest::none(s.best.t),
+                c: Counters::default(),
+                log: log.take(),
+            }
+        })
+        .collect();
+    let alive: Vec<bool> = lanes.iter().map(|l| l.alive).collect();
+    let finished = match size {
+        None => vec![packet::trace_packet_stack(scene, &mut lanes); rays.len()],
+        Some(size) => {
+            let push_down = matches!(traversal.variant, Variant::PushDown | Variant::PushDownShortStack);
+            packet::trace_packet_short_stack(scene, &mut lanes, size, push_down, traversal.robust)
+        }
+    };
+    Some(
+        lanes
+            .into_iter()
+            .zip(&setups)
+            .zip(alive.into_iter().zip(finished))
+            .map(|((mut lane, setup), (alive, finished))| {
+                if let Some(log) = lane.log.as_mut() {
+                    log.finish();
+                }
+                let best = if alive { lane.best.hit } else { setup.best };
+                (finish_hit(&lane.r, best, finished), lane.c)
+            })
+            .collect(),
+    )
+}
+
+/// A ray's control flow as the kernel's loops run it, for `kdtrace divergence`
+/// (src/divergence.rs).
+#[derive(Clone, Debug, Default)]
+pub struct FlowLog {
+    /// Per leaf visit that tested triangles: `[loop steps since the previous
+    /// such visit (interior nodes, empty or skipped leaves), triangles tested]`;
+    /// a last `[steps, 0]` for the steps after it. For a packet lane, one entry
+    /// per leaf step of its packet in which any lane tested triangles (0 for
+    /// this lane when it sat that leaf out), steps counted per packet step.
+    pub rounds: Vec<[u32; 2]>,
+    /// The node index of every fetch in order, with [`FlowLog::TESTED`] set on a
+    /// leaf whose triangles this ray tested.
+    pub fetches: Vec<u32>,
+    /// Steps since the last entry of `rounds`.
+    pending: u32,
+}
+
+impl FlowLog {
+    /// The flag on a fetch whose leaf triangles were tested.
+    pub const TESTED: u32 = 1 << 31;
+
+    fn fetched(&mut self, node: u32) {
+        self.pending += 1;
+        self.fetches.push(node);
+    }
+
+    /// The last fetch was a leaf that tested `tris` triangles (0: it counts as a step).
+    fn tested(&mut self, tris: u32) {
+        if tris > 0 {
+            self.rounds.push([self.pending - 1, tris]);
+            self.pending = 0;
+            if let Some(last) = self.fetches.last_mut() {
+                *last |= Self::TESTED;
+            }
+        }
+    }
+
+    /// A packet leaf step that some lane's tests made a round: every lane closes one.
+    fn packet_round(&mut self, tris: u32) {
+        self.rounds.push([self.pending - 1, tris]);
+        self.pending = 0;
+        if let (1.., Some(last)) = (tris, self.fetches.last_mut()) {
+            *last |= Self::TESTED;
+        }
+    }
+
+    fn finish(&mut self) {
+        if self.pending > 0 {
+            self.rounds.push([self.pending, 0]);
+            self.pending = 0;
+        }
+    }
+}
+
+/// A ray set up for traversal as trace.comp's `trace_ray` does it: the ray in
+/// its segment frame, the clip of its segment (None: it misses the scene box)
+/// and the closest hit so far (`t` in the segment frame).
+struct RaySetup {
+    r: TraceRay,
+    clipped: Option<(f32, f32)>,
+    best: Hit,
+}
+
+fn setup_ray(scene: &SceneRef, ray: &Ray, traversal: Traversal) -> RaySetup {
     let mut best = Hit { t: ray.tmax, prim_id: PRIM_MISS, u: 0.0, v: 0.0 };
-    let mut c = Counters::default();
+    let origin = Vec3::from(ray.origin);
+    let dir = ray.traced_dir();
+    let mut r = TraceRay {
+        wr: WatertightRay { robust: traversal.robust, ..WatertightRay::new(origin, dir).with_tmax(ray.tmax) },
+        eps: if traversal.robust { T_EPS } else { 0.0 },
+        t_err: 0.0,
+        flat_axes: 0,
+        band: Vec3::ZERO,
+        dir,
+        // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
+        inv_dir: (Vec3::ONE / dir).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX)),
+        tmin: ray.tmin,
+        tmax: ray.tmax,
+        any_hit: traversal.any_hit,
+    };
     if !ray.is_valid() {
         best.prim_id = PRIM_INVALID;
-    } else {
-        let origin = Vec3::from(ray.origin);
-        let dir = ray.traced_dir();
-        let mut r = TraceRay {
-            wr: WatertightRay { robust: traversal.robust, ..WatertightRay::new(origin, dir).with_tmax(ray.tmax) },
-            eps: if traversal.robust { T_EPS } else { 0.0 },
-            t_err: 0.0,
-            flat_axes: 0,
-            band: Vec3::ZERO,
-            dir,
-            // Clamped so that a plane through the origin gives t = 0, never 0 · inf.
-            inv_dir: (Vec3::ONE / dir).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX)),
-            tmin: ray.tmin,
-            tmax: ray.tmax,
-            any_hit: traversal.any_hit,
-        };
-        let mut clipped = clip_to_box(&r, &scene.bounds);
-        if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
-            if is_far(&r, &scene.bounds, t0) {
-                clipped = shift_to_scene(&mut r, &scene.bounds, t1);
-                best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
-            }
+        return RaySetup { r, clipped: None, best };
+    }
+    let mut clipped = clip_to_box(&r, &scene.bounds);
+    if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
+        if is_far(&r, &scene.bounds, t0) {
+            clipped = shift_to_scene(&mut r, &scene.bounds, t1);
+            best.t = ray.tmax - r.wr.t_shift; // the segment frame, like every hit below
         }
-        // A closed segment (see trace.comp): one float more, when robust.
-        if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
-            clipped = Some((t0, next_up(t1)));
-            best.t = next_up(best.t);
-        }
-        if let Some((t0, t1)) = clipped {
-            let mut s = State { scene, r: &r, best: Closest::none(best.t), c: &mut c, log };
-            let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
-            let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
-            let finished = match traversal.variant {
-                Variant::Stack => stack::trace_stack(&mut s, t0, t1),
-                Variant::Restart => restart::trace_restart(&mut s, t0, t1),
-                Variant::PushDown => push_down::trace_push_down(&mut s, t0, t1),
-                Variant::ShortStack => short_stack::trace_short_stack(&mut s, t0, t1, size, false),
-                Variant::PushDownShortStack => short_stack::trace_short_stack(&mut s, t0, t1, size, true),
-                Variant::Backtrack => backtrack::trace_backtrack(&mut s, links(), t0, t1),
-                Variant::Ropes => ropes::trace_ropes(&mut s, links(), t0, t1),
-            };
-            best = s.best.hit;
-            if !finished {
-                best.prim_id = PRIM_INCOMPLETE;
-            }
-        }
-        // Back to the ray's own parameter (one rounding: an f32 sum is correctly rounded).
-        if r.wr.t_shift != 0.0 {
-            best.t += r.wr.t_shift;
-        }
+    }
+    // A closed segment (see trace.comp): one float more, when robust.
+    if let (true, Some((t0, t1))) = (traversal.robust, clipped) {
+        clipped = Some((t0, next_up(t1)));
+        best.t = next_up(best.t);
+    }
+    RaySetup { r, clipped, best }
+}
+
+/// The hit as the kernel writes it: back in the ray's own parameter, cut-short
+/// traversals marked, no `t`, `u`, `v` without a hit.
+fn finish_hit(r: &TraceRay, mut best: Hit, finished: bool) -> Hit {
+    if !finished && best.prim_id != PRIM_INVALID {
+        best.prim_id = PRIM_INCOMPLETE;
+    }
+    // Back to the ray's own parameter (one rounding: an f32 sum is correctly rounded).
+    if r.wr.t_shift != 0.0 {
+        best.t += r.wr.t_shift;
     }
     if best.prim_id >= PRIM_INCOMPLETE {
         best.t = if best.prim_id == PRIM_MISS { f32::INFINITY } else { f32::NAN };
         best.u = 0.0;
         best.v = 0.0;
     }
-    (best, c)
+    best
+}
+
+fn trace_ray_inner(
+    scene: &SceneRef,
+    ray: &Ray,
+    traversal: Traversal,
+    mut log: Option<&mut FlowLog>,
+) -> (Hit, Counters) {
+    let RaySetup { r, clipped, mut best } = setup_ray(scene, ray, traversal);
+    let mut c = Counters::default();
+    let mut finished = true;
+    if let Some((t0, t1)) = clipped {
+        let mut s = State { scene, r: &r, best: Closest::none(best.t), c: &mut c, log: log.as_deref_mut() };
+        let links = || scene.links.expect("Backtrack and Ropes need SceneRef::with_links");
+        let size = traversal.stack_size.clamp(1, MAX_SHORT_STACK) as usize;
+        finished = match traversal.variant {
+            Variant::Stack => stack::trace_stack(&mut s, t0, t1),
+            Variant::Restart => restart::trace_restart(&mut s, t0, t1),
+            Variant::PushDown => push_down::trace_push_down(&mut s, t0, t1),
+            Variant::ShortStack => short_stack::trace_short_stack(&mut s, t0, t1, size, false),
+            Variant::PushDownShortStack => short_stack::trace_short_stack(&mut s, t0, t1, size, true),
+            Variant::Backtrack => backtrack::trace_backtrack(&mut s, links(), t0, t1),
+            Variant::Ropes => ropes::trace_ropes(&mut s, links(), t0, t1),
+        };
+        best = s.best.hit;
+    }
+    if let Some(log) = log {
+        log.finish();
+    }
+    (finish_hit(&r, best, finished), c)
 }
 
 /// What every variant carries: the scene, the ray, the closest hit (`Closest`,
@@ -160,9 +301,8 @@ struct State<'s, 'a> {
     r: &'s TraceRay,
     best: Closest,
     c: &'s mut Counters,
-    /// `stack` only, when asked ([`trace_ray_logged`]): the control flow, one
-    /// `[descent steps, triangles]` per leaf visit that tested triangles.
-    log: Option<&'s mut Vec<[u32; 2]>>,
+    /// The control flow, when asked ([`trace_ray_logged`]).
+    log: Option<&'s mut FlowLog>,
 }
 
 /// Twin of `next_up` in trace.comp: the next float above `x` (`f32::MIN_POSITIVE`

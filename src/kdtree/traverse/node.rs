@@ -26,6 +26,9 @@ impl State<'_, '_> {
     pub(super) fn fetch(&mut self, node: u32) -> KdNode {
         self.c.steps += 1;
         self.c.nodes += 1;
+        if let Some(log) = self.log.as_mut() {
+            log.fetched(node);
+        }
         self.scene.nodes[node as usize]
     }
 }

@@ -11,6 +11,7 @@ use crate::geom::{Aabb, WatertightRay};
 /// The CPU twin always traces as the careful pass does (SEGMENT_FRAME): where
 /// the shader selects to save instructions, the values here are the same bits
 /// (a subtraction of a zero `seg_lo`, `t_shift` or `t_err`).
+#[derive(Clone)]
 pub(super) struct TraceRay {
     pub(super) wr: WatertightRay,
     /// [`Traversal::robust`](crate::traversal::Traversal::robust): the widening of the split decisions.

@@ -11,10 +11,8 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     let mut stack = [(0u32, 0f32, 0f32); MAX_STACK as usize];
     let mut sp = 0usize;
     let mut node = 0u32;
-    let mut descent = 0u32; // steps since the last leaf that tested triangles (the log)
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
-        descent += 1;
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
             match visit {
@@ -34,17 +32,8 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
             }
             continue;
         }
-        let tested = s.c.triangles;
-        let hit = s.leaf(n, t1);
-        if let (Some(log), tris @ 1..) = (s.log.as_mut(), s.c.triangles - tested) {
-            log.push([descent - 1, tris]);
-            descent = 0;
-        }
-        if hit {
+        if s.leaf(n, t1) {
             if s.r.any_hit {
-                if let (Some(log), 1..) = (s.log.as_mut(), descent) {
-                    log.push([descent, 0]);
-                }
                 return true;
             }
             // Only entries starting before the hit can hold a closer one (stack.glsl).
@@ -53,9 +42,6 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
             }
         }
         if sp == 0 {
-            if let (Some(log), 1..) = (s.log.as_mut(), descent) {
-                log.push([descent, 0]);
-            }
             return true;
         }
         sp -= 1;
