@@ -11,10 +11,11 @@
 //! 1. kdtrace gets the instances as [`Geometry`]s read straight from the engine's
 //!    vertex bytes (offset, stride) and indices, with the engine's geometry and
 //!    instance ids; [`Scene::from_geometries`] flattens them into one scene, its
-//!    kd-tree is built and handed to the tracer ([`Tracer::replace_scene`] after
-//!    the first frame: today a moving instance rebuilds the whole tree, timed
+//!    kd-tree is built (today a moving instance rebuilds the whole tree, timed
 //!    below);
-//! 2. one command buffer: the engine's ray generation shader
+//! 2. one command buffer: after the first frame, the new scene's upload
+//!    ([`Tracer::record_replace_scene`]: recorded, no submit of kdtrace's own;
+//!    the old scene is released once the frame has completed), the engine's ray generation shader
 //!    (`glsl/examples/raygen.comp`), kdtrace's trace ([`Tracer::record_trace`]),
 //!    the engine's shading (`glsl/examples/engine_shade.comp`), which locates each
 //!    hit's `prim_id` in kdtrace's geometry ranges (instance id, geometry id,
@@ -228,7 +229,8 @@ pub struct Frame {
     pub instances: Vec<Instance>,
     /// Flattening the instances and building the kd-tree (CPU).
     pub build_ms: f64,
-    /// `Tracer::new` or `replace_scene`: the upload.
+    /// `Tracer::new` (the first frame), or recording the upload with
+    /// `record_replace_scene` (its copies run in the frame's command buffer).
     pub upload_ms: f64,
     /// Recording, submitting and waiting for the frame's command buffer.
     pub frame_ms: f64,
@@ -324,16 +326,14 @@ fn render_frames(
         let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         let start = Instant::now();
-        match &mut tracer {
-            None => {
-                let mut t = Tracer::new(&ctx, &tree, &scene.triangles)?;
-                t.prepare(&options)?;
-                tracer = Some(t);
-            }
-            Some(t) => t.replace_scene(&tree, &scene.triangles)?,
+        let first = tracer.is_none();
+        if first {
+            let mut t = Tracer::new(&ctx, &tree, &scene.triangles)?;
+            t.prepare(&options)?;
+            tracer = Some(t);
         }
         let tracer = tracer.as_mut().expect("made above");
-        let upload_ms = start.elapsed().as_secs_f64() * 1e3;
+        let mut upload_ms = start.elapsed().as_secs_f64() * 1e3;
 
         // 2. The frame's buffers: rays and hits in one buffer (read back at the
         // end), the geometry ranges and instances of this frame, the pixels.
@@ -407,6 +407,13 @@ fn render_frames(
         // wait below has returned.
         let binding = unsafe {
             device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).context("vkBeginCommandBuffer")?;
+            if !first {
+                // This frame's scene: its upload recorded here, the old scene kept
+                // until this frame has completed (released after the wait below).
+                let start = Instant::now();
+                tracer.record_replace_scene(cmd, &tree, &scene.triangles, u64::from(frame_index))?;
+                upload_ms = start.elapsed().as_secs_f64() * 1e3;
+            }
             device.cmd_bind_pipeline(cmd, compute, raygen.pipeline);
             device.cmd_bind_descriptor_sets(cmd, compute, raygen.layout, 0, &[raygen_set], &[]);
             let stages = vk::ShaderStageFlags::COMPUTE;
@@ -440,6 +447,7 @@ fn render_frames(
         };
         engine.submit_and_wait(cmd)?;
         drop(binding);
+        tracer.release_retired(u64::from(frame_index));
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;
 
         let words: &[u32] = bytemuck::cast_slice(res.read(pixel_buf)?);

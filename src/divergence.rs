@@ -207,6 +207,8 @@ pub struct ReplayTimes {
 /// Runs `glsl/divergence_replay.comp` over `records` on `ctx`'s device,
 /// `repeat` times after a warm-up, in its four modes; the memory-only mode
 /// fetches from a copy of the tracer's node and triangle texels of `tree`.
+/// Records larger than one storage buffer range run in batches of rays (the
+/// sum of their medians).
 /// `None` without timestamps.
 pub fn replay(
     ctx: &Arc<GpuContext>,
@@ -215,7 +217,6 @@ pub fn replay(
     records: &Records,
     repeat: usize,
 ) -> Result<Option<ReplayTimes>> {
-    let n = records.rays() as u32;
     let Some(timestamps) = Timestamps::new(ctx, 2)? else { return Ok(None) };
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
     let texel = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
@@ -224,15 +225,42 @@ pub fn replay(
         let data = if words.is_empty() { &[0u32][..] } else { words };
         Buffer::with_data(ctx, bytemuck::cast_slice(data), storage, what)
     };
-    let offsets = upload(&records.offsets, "divergence offsets")?;
-    let words = upload(&records.words, "divergence records")?;
-    let fetch_offsets = upload(&records.fetch_offsets, "divergence fetch offsets")?;
-    let fetches = upload(&records.fetches, "divergence fetches")?;
+    // Rays in batches whose records fit one storage buffer range each.
+    let limit = (ctx.info.max_storage_buffer_range / 4).min(u64::from(u32::MAX)) as usize;
+    let mut batches = Vec::new();
+    let mut start = 0;
+    while start < records.rays() {
+        let mut end = start + 1;
+        let fits = |end: usize| {
+            let words = (records.offsets[end] - records.offsets[start]) as usize;
+            let fetches = (records.fetch_offsets[end] - records.fetch_offsets[start]) as usize;
+            words.max(fetches).max(end - start + 1) <= limit
+        };
+        let mut step = 1 << 16;
+        while step > 0 {
+            if end + step <= records.rays() && fits(end + step) {
+                end += step;
+            } else {
+                step /= 2;
+            }
+        }
+        let slice = |offsets: &[u32], words: &[u32], what: &str| -> Result<[Buffer; 2]> {
+            let base = offsets[start];
+            let rebased: Vec<u32> = offsets[start..=end].iter().map(|o| o - base).collect();
+            let (lo, hi) = (base as usize, offsets[end] as usize);
+            Ok([upload(&rebased, what)?, upload(&words[lo..hi], what)?])
+        };
+        let rounds = slice(&records.offsets, &records.words, "divergence records")?;
+        let fetches = slice(&records.fetch_offsets, &records.fetches, "divergence fetches")?;
+        batches.push(((end - start) as u32, rounds, fetches));
+        start = end;
+    }
     let nodes = Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), texel, "divergence nodes")?;
     let tri_texels = crate::trace::scene::triangle_texels(tree, triangles);
     let tris = Buffer::with_data(ctx, bytemuck::cast_slice(&tri_texels), texel, "divergence triangles")?;
+    let most = batches.iter().map(|b| b.0).max().unwrap_or(1).max(1);
     let sink =
-        Buffer::new(ctx, 4 * u64::from(n.max(1)), storage, gpu_allocator::MemoryLocation::GpuOnly, "divergence sink")?;
+        Buffer::new(ctx, 4 * u64::from(most), storage, gpu_allocator::MemoryLocation::GpuOnly, "divergence sink")?;
     let median = |mode: u32| -> Result<f64> {
         let kernel = Kernel::new(
             ctx,
@@ -247,24 +275,28 @@ pub fn replay(
                 ..Default::default()
             },
         )?;
-        let (o, w) = if mode < 2 { (&offsets, &words) } else { (&fetch_offsets, &fetches) };
-        let set = BufferSet::new(ctx, &kernel, &[o, w, &sink, &nodes, &tris])?;
-        let mut times = Vec::new();
-        for _ in 0..=repeat.max(1) {
-            ctx.submit_and_wait(|cmd| {
-                // SAFETY: `cmd` is recording; the set's buffers outlive the wait.
-                unsafe {
-                    timestamps.record_reset(cmd);
-                    timestamps.record(cmd, 0);
-                    kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&n), n);
-                    timestamps.record(cmd, 1);
-                }
-            })?;
-            times.push(timestamps.seconds_between(0, 1)?);
+        let mut total = 0.0;
+        for (n, rounds, fetches) in &batches {
+            let [o, w] = if mode < 2 { rounds } else { fetches };
+            let set = BufferSet::new(ctx, &kernel, &[o, w, &sink, &nodes, &tris])?;
+            let mut times = Vec::new();
+            for _ in 0..=repeat.max(1) {
+                ctx.submit_and_wait(|cmd| {
+                    // SAFETY: `cmd` is recording; the set's buffers outlive the wait.
+                    unsafe {
+                        timestamps.record_reset(cmd);
+                        timestamps.record(cmd, 0);
+                        kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(n), *n);
+                        timestamps.record(cmd, 1);
+                    }
+                })?;
+                times.push(timestamps.seconds_between(0, 1)?);
+            }
+            times.remove(0); // the warm-up (lavapipe compiles on the first dispatch)
+            times.sort_by(f64::total_cmp);
+            total += times[times.len() / 2];
         }
-        times.remove(0); // the warm-up (lavapipe compiles on the first dispatch)
-        times.sort_by(f64::total_cmp);
-        Ok(times[times.len() / 2])
+        Ok(total)
     };
     Ok(Some(ReplayTimes { replay_s: median(0)?, read_s: median(1)?, memory_s: median(2)?, memory_read_s: median(3)? }))
 }

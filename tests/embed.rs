@@ -645,3 +645,71 @@ fn a_missing_barrier_after_the_callers_raygen_is_reported() {
     drop((raygen_set, raygen, tracer, ray_buf, staging, hit_buf));
     assert_validation_clean(&ctx);
 }
+
+/// A scene replaced inside the engine's frame: one command buffer traces the
+/// old scene, records the new scene's upload (`record_replace_scene`: no submit,
+/// no wait) and traces the new scene with a side-buffer variant (the side
+/// buffers come along in the same recording). Hazard-free under synchronization
+/// validation, each trace equal to a fresh tracer's; the old scene and the
+/// staging buffers stay until the caller says the frame completed.
+#[test]
+fn scenes_replaced_in_a_recorded_frame_are_released_after_it() {
+    let Some(SyncCase { ctx, scene, tree, mut tracer, camera }) = sync_case() else { return };
+    let (teapot, teapot_tree) = load("teapot.obj");
+    let mut rays = camera_rays(&camera, 24, 16);
+    let lo = scene.bounds.min.min(teapot.bounds.min);
+    let hi = scene.bounds.max.max(teapot.bounds.max);
+    rays.extend(random_rays(&mut Rng(21), lo, hi, 400));
+    let n = rays.len();
+    let (old_ranges, new_ranges) = (Ranges::new(&ctx, &rays), Ranges::new(&ctx, &rays));
+    let options = TraceOptions::default();
+    let backtrack = TraceOptions::variant(Variant::Backtrack);
+    tracer.prepare(&backtrack).unwrap();
+    let expected_old = tracer.trace(&rays, &options).unwrap();
+    let mut fresh = Tracer::new(&ctx, &teapot_tree, &teapot.triangles).unwrap();
+    fresh.prepare(&backtrack).unwrap();
+    let expected_new = fresh.trace(&rays, &backtrack).unwrap();
+    let fresh_bytes = fresh.device_bytes();
+    drop(fresh);
+    let old_bytes = tracer.device_bytes();
+
+    // SAFETY: the ranges are live storage buffers; the bindings outlive the wait.
+    let old_binding = unsafe { tracer.bind(old_ranges.rays, old_ranges.hits, None, &options) }.unwrap();
+    assert!(ctx.take_validation_messages().is_empty());
+    let new_binding = submit(&ctx, |cmd| {
+        // SAFETY: `cmd` is recording; everything it uses outlives the wait.
+        unsafe {
+            tracer.record_binding(cmd, &old_binding, n as u32).unwrap();
+            tracer.record_replace_scene(cmd, &teapot_tree, &teapot.triangles, 7).unwrap();
+            let binding = tracer.bind(new_ranges.rays, new_ranges.hits, None, &backtrack).unwrap();
+            tracer.record_binding(cmd, &binding, n as u32).unwrap();
+            binding
+        }
+    });
+    let messages = ctx.take_validation_messages();
+    assert!(messages.is_empty(), "a recorded scene replacement is not hazard-free:\n{}", messages.join("\n"));
+    assert!(same_bits(&old_ranges.hits(n), &expected_old.hits), "the trace before the replacement");
+    assert!(same_bits(&new_ranges.hits(n), &expected_new.hits), "the trace after the replacement");
+    assert_eq!(tracer.device_bytes(), fresh_bytes, "the new scene with its side buffers");
+    // The old binding belongs to the old scene.
+    // SAFETY: nothing is recorded when it fails.
+    invalid(submit(&ctx, |cmd| unsafe { tracer.record_binding(cmd, &old_binding, n as u32) }), "scene");
+
+    // Retired: the old scene (with its side buffers) and the staging buffers.
+    assert!(tracer.retired_bytes() > old_bytes, "{} retired bytes", tracer.retired_bytes());
+    assert_eq!(tracer.release_retired(6), 0, "frame 7 is not done yet");
+    assert!(tracer.retired_bytes() > 0);
+    assert_eq!(tracer.release_retired(7), 1);
+    assert_eq!(tracer.retired_bytes(), 0);
+    // The replaced scene still traces after the release.
+    assert!(same_bits(&tracer.trace(&rays, &backtrack).unwrap().hits, &expected_new.hits));
+
+    // On error nothing changes: an empty scene.
+    let empty = KdTree::build(&[], &BuildConfig::default());
+    // SAFETY: as above.
+    invalid(submit(&ctx, |cmd| unsafe { tracer.record_replace_scene(cmd, &empty, &[], 8) }), "no triangles");
+    assert_eq!(tracer.retired_bytes(), 0);
+    drop((old_binding, new_binding, tracer, old_ranges, new_ranges));
+    drop(tree);
+    assert_validation_clean(&ctx);
+}

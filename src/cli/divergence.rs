@@ -260,56 +260,100 @@ fn write_csv(path: &std::path::Path, rows: &[Row]) -> Result<()> {
     Ok(())
 }
 
-/// Bars per row: the replay's, the memory-only kernel's and the records read's time as shares
-/// of the real kernel's, beside the SIMD efficiency.
+/// Short label of a row's traversal and packet width on the chart's x axis.
+fn short_label(r: &Row) -> String {
+    let t = match r.traversal.as_str() {
+        "stack" => "st",
+        "restart" => "rs",
+        "push-down" => "pd",
+        "short-stack" => "ss",
+        "push-down-short-stack" => "pss",
+        "backtrack" => "bt",
+        "ropes" => "rp",
+        other => other,
+    };
+    if r.packet_width > 1 {
+        format!("{t}/{}", r.packet_width)
+    } else {
+        t.to_string()
+    }
+}
+
+/// One panel per scene and ray kind (kinds in rows, scenes in columns); in each,
+/// a stacked bar per traversal and packet width: the shares of the real kernel's
+/// time that the control flow (replay less its record read), the memory traffic
+/// (memory-only kernel less its record read) and the rest (arithmetic) take,
+/// and the overall SIMD efficiency as a black tick.
 fn plot(path: &std::path::Path, rows: &[Row], title: &str) -> Result<()> {
     use plotters::prelude::*;
     kdtrace::bench::plot::ensure_font()?;
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = BitMapBackend::new(path, (200 * rows.len().max(1) as u32 + 200, 520)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(50)
-            .build_cartesian_2d(-0.5..rows.len().max(1) as f64 - 0.5, 0.0..1.1f64)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(rows.len().max(1))
-            .x_label_formatter(&|x| match (x.round() - x).abs() < 1e-6 && *x >= 0.0 {
-                true => rows.get(x.round() as usize).map_or(String::new(), |r| {
-                    let w = if r.packet_width > 1 { format!(" W{}", r.packet_width) } else { String::new() };
-                    format!("{} {} {}{w}", r.scene, r.kind, r.traversal)
-                }),
-                false => String::new(),
-            })
-            .y_desc("share of the real kernel's time / SIMD efficiency")
-            .draw()?;
-        let series = [
-            ("replay ÷ real", RED),
-            ("memory-only ÷ real", MAGENTA),
-            ("records read ÷ real", BLUE),
-            ("SIMD efficiency (overall)", GREEN),
-        ];
-        for (s, (label, color)) in series.into_iter().enumerate() {
-            let bars = rows.iter().enumerate().map(|(i, r)| {
-                let value = match s {
-                    0 => r.replay_s / r.real_s,
-                    1 => r.memory_s / r.real_s,
-                    2 => r.read_s / r.real_s,
-                    _ => r.overall,
-                };
-                let x0 = i as f64 - 0.38 + 0.19 * s as f64;
-                Rectangle::new([(x0, 0.0), (x0 + 0.17, value.min(1.1))], color.filled())
-            });
-            chart
-                .draw_series(bars)?
-                .label(label)
-                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], color.filled()));
+    let mut scenes: Vec<&str> = Vec::new();
+    let mut kinds: Vec<&str> = Vec::new();
+    for r in rows {
+        if !scenes.contains(&r.scene.as_str()) {
+            scenes.push(&r.scene);
         }
-        chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        if !kinds.contains(&r.kind.as_str()) {
+            kinds.push(&r.kind);
+        }
+    }
+    let per_panel = rows.iter().filter(|r| r.scene == scenes[0] && r.kind == kinds[0]).count().max(1);
+    let panel_w = (40 * per_panel as u32 + 90).max(260);
+    let size = (panel_w * scenes.len().max(1) as u32, 330 * kinds.len().max(1) as u32 + 70);
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::new(path, size).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root
+            .titled(&format!("{title}: share of the real kernel's time (tick: SIMD efficiency)"), ("sans-serif", 18))?;
+        let (body, legend) = root.split_vertically(size.1 - 70);
+        let panels = body.split_evenly((kinds.len().max(1), scenes.len().max(1)));
+        let series = [("control flow (replay)", RED), ("memory (memory-only)", BLUE), ("the rest: arithmetic", GREEN)];
+        for (k, kind) in kinds.iter().enumerate() {
+            for (s, scene) in scenes.iter().enumerate() {
+                let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == *scene && r.kind == *kind).collect();
+                let area = &panels[k * scenes.len() + s];
+                let mut chart = ChartBuilder::on(area)
+                    .caption(format!("{scene}, {kind}"), ("sans-serif", 14))
+                    .margin(6)
+                    .x_label_area_size(36)
+                    .y_label_area_size(36)
+                    .build_cartesian_2d(-0.5..mine.len().max(1) as f64 - 0.5, 0.0..1.05f64)?;
+                chart
+                    .configure_mesh()
+                    .disable_x_mesh()
+                    .x_labels(mine.len().max(1))
+                    .x_label_style(("sans-serif", 10))
+                    .x_label_formatter(&|x| match (x.round() - x).abs() < 1e-6 && *x >= 0.0 {
+                        true => mine.get(x.round() as usize).map_or(String::new(), |r| short_label(r)),
+                        false => String::new(),
+                    })
+                    .draw()?;
+                for (i, r) in mine.iter().enumerate() {
+                    let control = ((r.replay_s - r.read_s) / r.real_s).clamp(0.0, 1.0);
+                    let memory = ((r.memory_s - r.memory_read_s) / r.real_s).clamp(0.0, 1.0 - control);
+                    let parts = [control, memory, 1.0 - control - memory];
+                    let x = i as f64;
+                    let mut y = 0.0;
+                    for (part, (_, color)) in parts.iter().zip(series) {
+                        chart.draw_series([Rectangle::new([(x - 0.35, y), (x + 0.35, y + part)], color.filled())])?;
+                        y += part;
+                    }
+                    let e = r.overall * r.active;
+                    chart.draw_series([PathElement::new(vec![(x - 0.4, e), (x + 0.4, e)], BLACK.stroke_width(3))])?;
+                }
+            }
+        }
+        let mut x = 20;
+        for (label, color) in series {
+            legend.draw(&Rectangle::new([(x, 20), (x + 14, 34)], color.filled()))?;
+            legend.draw(&Text::new(label, (x + 20, 20), ("sans-serif", 14)))?;
+            x += 240;
+        }
+        legend.draw(&Text::new(
+            "st stack, rs restart, pd push-down, ss short-stack, pss push-down short-stack, bt backtrack, rp ropes; /W packets",
+            (20, 46),
+            ("sans-serif", 12),
+        ))?;
         root.present()?;
         Ok(())
     };

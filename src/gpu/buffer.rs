@@ -123,6 +123,34 @@ impl Buffer {
         Ok(buffer)
     }
 
+    /// A device-local buffer holding `data`, its copy from a host-visible
+    /// staging buffer recorded into `cmd` (no submit, no wait). Returns the
+    /// buffer and the staging buffer, which must live until `cmd` has completed.
+    /// The caller records the barrier from `TRANSFER`/`TRANSFER_WRITE` to the
+    /// buffer's readers.
+    ///
+    /// # Safety
+    /// `cmd` is a command buffer of the context's device in the recording state,
+    /// outside a render pass.
+    pub unsafe fn with_data_recorded(
+        ctx: &Arc<GpuContext>,
+        cmd: vk::CommandBuffer,
+        data: &[u8],
+        usage: vk::BufferUsageFlags,
+        name: &str,
+    ) -> Result<(Buffer, Buffer)> {
+        let size = (data.len() as u64).max(4);
+        let buffer = Buffer::new(ctx, size, usage | vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuOnly, name)?;
+        let mut staging =
+            Buffer::new(ctx, size, vk::BufferUsageFlags::TRANSFER_SRC, MemoryLocation::CpuToGpu, "staging")?;
+        staging.write(0, data)?;
+        let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size }];
+        // SAFETY: both buffers are alive and large enough; the caller keeps the
+        // staging buffer alive until `cmd` completes and `cmd` is recording.
+        unsafe { ctx.device.cmd_copy_buffer(cmd, staging.buffer, buffer.buffer, &region) };
+        Ok((buffer, staging))
+    }
+
     /// The buffer's device address (`vkGetBufferDeviceAddress`), for acceleration
     /// structure builds. The buffer must have been created with
     /// `SHADER_DEVICE_ADDRESS` usage on a context with the ray-query backend

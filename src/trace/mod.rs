@@ -31,6 +31,9 @@
 //!    This submits copies on the context's queue and waits for them.
 //! 3. **Replace** the scene with [`Tracer::replace_scene`]: same checks and upload;
 //!    pipelines are kept, the old buffers are freed, bindings made before are refused.
+//!    In an engine's frame, [`Tracer::record_replace_scene`] records the upload into
+//!    your command buffer instead (no submit, no wait) and keeps the old buffers
+//!    until you say the frame completed ([`Tracer::release_retired`]).
 //! 4. **Drop** the tracer: its buffers, pipelines and descriptor-set layouts are
 //!    destroyed and its allocations freed. Nothing else remains: kdtrace has no
 //!    global state, and descriptor sets live in the [`TraceBinding`]s you hold.
@@ -101,7 +104,8 @@
 //! creating a descriptor set per frame, make a binding once with [`Tracer::bind`]
 //! and record it every frame with [`Tracer::record_binding`] (it may be recorded
 //! into any number of command buffers, also pending ones, since it is never
-//! rewritten). Do not call [`Tracer::replace_scene`] or drop the tracer while a
+//! rewritten). Do not call [`Tracer::replace_scene`] (use
+//! [`Tracer::record_replace_scene`]) or drop the tracer while a
 //! recorded trace is pending on the GPU. A binding holds the context (an `Arc`),
 //! so drop bindings, tracers and the context before you destroy an adopted device.
 //!
@@ -126,7 +130,6 @@ use crate::consts::{
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
 use crate::gpu::{Buffer, BufferRange, GpuContext, Timestamps};
-use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::Counters;
 use crate::kdtree::KdTree;
 use crate::ray_query::RayQueryScene;
@@ -166,6 +169,15 @@ pub struct Tracer {
     write_dummy: Buffer,
     pipelines: TracePipelines,
     chunk: usize,
+    /// Scenes replaced by [`Tracer::record_replace_scene`] and its staging
+    /// buffers, each under the frame value that may still use them.
+    retired: Vec<(u64, Retired)>,
+}
+
+/// What a recorded scene replacement leaves for [`Tracer::release_retired`].
+struct Retired {
+    scene: TracerScene,
+    staging: Vec<Buffer>,
 }
 
 impl Tracer {
@@ -221,6 +233,7 @@ impl Tracer {
             write_dummy,
             pipelines: TracePipelines::new(ctx),
             chunk,
+            retired: Vec::new(),
         })
     }
 
@@ -240,6 +253,69 @@ impl Tracer {
         };
         self.generation += 1;
         Ok(())
+    }
+
+    /// [`Tracer::replace_scene`] without a hidden submit or wait, for an engine's
+    /// frame: records the upload of `tree` over `triangles` into `cmd`, followed
+    /// by a barrier that makes it visible to the trace kernels (buffer barriers
+    /// on the new buffers only), and makes it the tracer's scene at once, so that
+    /// traces recorded after it (in `cmd` or in later submissions) trace it. When
+    /// the old scene had the side buffers of `backtrack`/`ropes`, the new one gets
+    /// them in the same recording. Bindings made before are refused afterwards
+    /// ([`Tracer::bind`] again); those already recorded keep the old scene.
+    ///
+    /// The old scene's buffers and the staging buffers are retired under `frame`
+    /// (any value that grows with your frames: a frame index, a timeline
+    /// semaphore value) and destroyed by [`Tracer::release_retired`] once you
+    /// say that frame has completed, so frames in flight stay valid.
+    ///
+    /// Errors: those of [`Tracer::new`] (nothing is recorded then and the old scene
+    /// stays); `Error::InvalidInput` on the ray-query backend (its builds are not
+    /// recorded yet: use [`Tracer::replace_scene`]).
+    ///
+    /// # Safety
+    /// `cmd` is a command buffer of the context's device, from a pool of a
+    /// compute-capable queue family, in the recording state, outside a render
+    /// pass. `cmd` must complete before `release_retired` is called with a value
+    /// of `frame` or more, and before the tracer is dropped.
+    pub unsafe fn record_replace_scene(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        tree: &KdTree,
+        triangles: &[[Vec3; 3]],
+        frame: u64,
+    ) -> Result<()> {
+        let TracerScene::KdTree(old) = &self.scene else {
+            return Err(Error::InvalidInput(
+                "recorded scene updates are for the kd-tree backend; the ray-query backend replaces with replace_scene"
+                    .into(),
+            ));
+        };
+        // SAFETY: the caller's contract on `cmd`.
+        let (scene, staging) =
+            unsafe { SceneBuffers::record_upload(&self.ctx, cmd, tree, triangles, old.links.is_some()) }?;
+        let old = std::mem::replace(&mut self.scene, TracerScene::KdTree(Box::new(scene)));
+        self.retired.push((frame, Retired { scene: old, staging }));
+        self.generation += 1;
+        Ok(())
+    }
+
+    /// Destroys what [`Tracer::record_replace_scene`] retired under frame values
+    /// up to `completed` (their command buffers have completed); returns how many
+    /// replaced scenes were released.
+    pub fn release_retired(&mut self, completed: u64) -> usize {
+        let before = self.retired.len();
+        self.retired.retain(|(frame, _)| *frame > completed);
+        before - self.retired.len()
+    }
+
+    /// Bytes on the device still held by retired scenes and staging buffers.
+    pub fn retired_bytes(&self) -> u64 {
+        let scene = |s: &TracerScene| match s {
+            TracerScene::KdTree(s) => s.bytes(),
+            TracerScene::RayQuery(s) => s.device_bytes(),
+        };
+        self.retired.iter().map(|(_, r)| scene(&r.scene) + r.staging.iter().map(|b| b.size).sum::<u64>()).sum()
     }
 
     /// The backend this tracer traces with.
@@ -266,10 +342,7 @@ impl Tracer {
     /// once uploaded.
     pub fn device_bytes(&self) -> u64 {
         match &self.scene {
-            TracerScene::KdTree(s) => {
-                let links = s.links.as_ref().map_or(0, |l| l.iter().map(|b| b.size).sum());
-                s.nodes.size + s.prim_indices.size + s.triangles.size + links
-            }
+            TracerScene::KdTree(s) => s.bytes(),
             TracerScene::RayQuery(s) => s.device_bytes(),
         }
     }
@@ -335,23 +408,10 @@ impl Tracer {
     /// Uploads the side buffers of `backtrack` and `ropes` once (kd-tree backend).
     fn ensure_links(&mut self) -> Result<()> {
         let TracerScene::KdTree(scene) = &mut self.scene else { return Ok(()) };
-        if scene.links.is_some() {
-            return Ok(());
+        if scene.links.is_none() {
+            let ctx = &self.ctx;
+            scene.links = Some(scene.make_links(ctx, |data, usage, name| Buffer::with_data(ctx, data, usage, name))?);
         }
-        let links = TreeLinks::new(&scene.host_nodes, scene.bounds);
-        let limit = self.ctx.info.max_storage_buffer_range;
-        if std::mem::size_of_val(links.boxes.as_slice()) as u64 > limit {
-            return Err(Error::DeviceLimit(format!(
-                "the node boxes take {} bytes; the device allows {limit} per storage buffer",
-                std::mem::size_of_val(links.boxes.as_slice())
-            )));
-        }
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        scene.links = Some([
-            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.parents), usage, "parents")?,
-            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.boxes), usage, "node boxes")?,
-            Buffer::with_data(&self.ctx, bytemuck::cast_slice(&links.ropes), usage, "ropes")?,
-        ]);
         Ok(())
     }
     /// Traces `rays` (any number: they go in chunks) and returns the closest hit of

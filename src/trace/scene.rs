@@ -9,6 +9,7 @@ use glam::Vec3;
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
 use crate::gpu::{Buffer, GpuContext};
+use crate::kdtree::links::TreeLinks;
 use crate::kdtree::{KdNode, KdTree};
 use crate::ray_query::RayQueryScene;
 
@@ -43,8 +44,72 @@ pub(super) struct SceneBuffers {
 
 impl SceneBuffers {
     /// Checks `tree` over `triangles` against the device's limits and uploads it
-    /// ([`scene_device_bytes`] bytes).
+    /// ([`scene_device_bytes`] bytes), submitting the copies and waiting.
     pub(super) fn upload(ctx: &Arc<GpuContext>, tree: &KdTree, triangles: &[[Vec3; 3]]) -> Result<SceneBuffers> {
+        SceneBuffers::make(ctx, tree, triangles, |data, usage, name| Buffer::with_data(ctx, data, usage, name))
+    }
+
+    /// [`SceneBuffers::upload`] with the copies recorded into `cmd`, followed by
+    /// one barrier that makes them visible to the trace kernels (buffer barriers
+    /// on the new buffers only). With `links`, the side buffers of `backtrack`
+    /// and `ropes` too. Returns the staging buffers, to keep until `cmd` completes.
+    ///
+    /// # Safety
+    /// `cmd` is a command buffer of the context's device, recording, outside a render pass.
+    pub(super) unsafe fn record_upload(
+        ctx: &Arc<GpuContext>,
+        cmd: vk::CommandBuffer,
+        tree: &KdTree,
+        triangles: &[[Vec3; 3]],
+        links: bool,
+    ) -> Result<(SceneBuffers, Vec<Buffer>)> {
+        let mut staging = Vec::new();
+        let mut upload = |data: &[u8], usage, name: &str| {
+            // SAFETY: the caller's contract on `cmd`; the staging buffers are returned.
+            let (buffer, stage) = unsafe { Buffer::with_data_recorded(ctx, cmd, data, usage, name) }?;
+            staging.push(stage);
+            Ok(buffer)
+        };
+        let mut scene = SceneBuffers::make(ctx, tree, triangles, &mut upload)?;
+        if links {
+            scene.links = Some(scene.make_links(ctx, &mut upload)?);
+        }
+        let mut barriers = vec![&scene.nodes, &scene.prim_indices, &scene.triangles];
+        barriers.extend(scene.links.iter().flatten());
+        let barriers: Vec<vk::BufferMemoryBarrier> = barriers
+            .into_iter()
+            .map(|b| {
+                vk::BufferMemoryBarrier::default()
+                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                    .dst_access_mask(vk::AccessFlags::SHADER_READ)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .buffer(b.buffer)
+                    .offset(0)
+                    .size(vk::WHOLE_SIZE)
+            })
+            .collect();
+        // SAFETY: `cmd` is recording (the caller's contract); the buffers are alive.
+        unsafe {
+            ctx.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &barriers,
+                &[],
+            )
+        };
+        Ok((scene, staging))
+    }
+
+    fn make(
+        ctx: &Arc<GpuContext>,
+        tree: &KdTree,
+        triangles: &[[Vec3; 3]],
+        mut upload: impl FnMut(&[u8], vk::BufferUsageFlags, &str) -> Result<Buffer>,
+    ) -> Result<SceneBuffers> {
         if triangles.is_empty() || tree.bounds.is_empty() {
             return Err(Error::InvalidInput("the scene has no triangles that can be hit".into()));
         }
@@ -72,14 +137,43 @@ impl SceneBuffers {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
         let texel_usage = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
         Ok(SceneBuffers {
-            nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.nodes), texel_usage, "kd-tree nodes")?,
-            prim_indices: Buffer::with_data(ctx, bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,
-            triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&tri_texels), texel_usage, "triangle texels")?,
+            nodes: upload(bytemuck::cast_slice(&tree.nodes), texel_usage, "kd-tree nodes")?,
+            prim_indices: upload(bytemuck::cast_slice(&tree.prim_indices), usage, "prim indices")?,
+            triangles: upload(bytemuck::cast_slice(&tri_texels), texel_usage, "triangle texels")?,
             bounds: tree.bounds,
             triangle_count: triangles.len(),
             host_nodes: tree.nodes.clone(),
             links: None,
         })
+    }
+
+    /// The side buffers of `backtrack` and `ropes` (parent links, node boxes,
+    /// ropes; Foley & Sugerman 2005, Popov et al. 2007), made by `upload`.
+    pub(super) fn make_links(
+        &self,
+        ctx: &Arc<GpuContext>,
+        mut upload: impl FnMut(&[u8], vk::BufferUsageFlags, &str) -> Result<Buffer>,
+    ) -> Result<[Buffer; 3]> {
+        let links = TreeLinks::new(&self.host_nodes, self.bounds);
+        let limit = ctx.info.max_storage_buffer_range;
+        let bytes = std::mem::size_of_val(links.boxes.as_slice()) as u64;
+        if bytes > limit {
+            return Err(Error::DeviceLimit(format!(
+                "the node boxes take {bytes} bytes; the device allows {limit} per storage buffer"
+            )));
+        }
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER;
+        Ok([
+            upload(bytemuck::cast_slice(&links.parents), usage, "parents")?,
+            upload(bytemuck::cast_slice(&links.boxes), usage, "node boxes")?,
+            upload(bytemuck::cast_slice(&links.ropes), usage, "ropes")?,
+        ])
+    }
+
+    /// Bytes of the buffers on the device.
+    pub(super) fn bytes(&self) -> u64 {
+        let links = self.links.as_ref().map_or(0, |l| l.iter().map(|b| b.size).sum());
+        self.nodes.size + self.prim_indices.size + self.triangles.size + links
     }
 }
 
