@@ -160,6 +160,7 @@ pub mod stress;
 pub mod sweep;
 pub mod trace;
 pub mod traversal;
+pub mod twolevel;
 
 pub use error::{Error, Result};
 pub use geom::{Aabb, Hit, Ray};

@@ -1,0 +1,355 @@
+//! Two-level scenes: geometries with their own kd-trees, placed by instances
+//! (a 3×4 transform, an instance id, an 8-bit visibility mask) over a top-level
+//! BVH of the instances' world boxes, as Vulkan ray query and Embree place
+//! them. Many instances of one geometry share its tree: an instance costs its
+//! transform and box. Moving instances rebuilds the top level only
+//! ([`TwoLevelScene::set_instances`]).
+//!
+//! **The CPU model and twin only, so far (issue 29, items 2–3):** the GPU
+//! kernels still trace one flattened tree (`Scene::from_geometries`). This
+//! module fixes the contract the GPU two-level kernels are to meet bit for bit:
+//!
+//! - **The object-space ray** of instance `i` is [`TwoLevelScene::object_ray`]:
+//!   origin `W·(o, 1)` and direction `W·(d, 0)`, with `W` the world-to-object
+//!   transform (the inverse of the instance's transform, computed in f64 and
+//!   rounded to f32 once), each component summed left to right in f32 without
+//!   fused multiply-adds; `tmin`, `tmax` unchanged (the direction is not
+//!   normalized, so `t` is the world ray's parameter).
+//! - **Each instance's answer is the robust traversal's for its object ray**:
+//!   exact for that ray (the guarantees of docs/ACCURACY.md, on the geometry's
+//!   own tree). Far-translated or badly conditioned transforms lose accuracy
+//!   in the object ray itself, as in Vulkan; never inside the geometry.
+//! - **The closest instance** is the one whose hit has the least f32 `t`;
+//!   instances are searched with `tmax` cut to the best `t` so far, so two
+//!   instances whose hits lie within one f32 rounding of each other may answer
+//!   either (a tie).
+//! - **Front face** is decided in object space, as in Vulkan: the triangle is
+//!   front-facing when `dot((v1 - v0) × (v2 - v0), d_object) < 0` (its vertices
+//!   appear clockwise from the origin in a left-handed frame), so a mirroring
+//!   transform does not flip it.
+//! - **Masks**: an instance is visible to a ray when `ray_mask & instance.mask != 0`.
+
+use glam::{Affine3A, DAffine3, DVec3, Vec3};
+
+use crate::consts::PRIM_MISS;
+use crate::error::{Error, Result};
+use crate::geom::{Aabb, Ray};
+use crate::kdtree::traverse::{trace_ray, SceneRef, Traversal};
+use crate::kdtree::KdTree;
+
+/// A geometry with its own kd-tree, in its object space.
+pub struct BottomLevel {
+    /// The caller's geometry id.
+    pub id: u32,
+    /// Its triangles.
+    pub triangles: Vec<[Vec3; 3]>,
+    /// Its kd-tree over `triangles`.
+    pub tree: KdTree,
+}
+
+/// One placement of a geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    /// Index into the scene's geometries.
+    pub geometry: usize,
+    /// Object to world.
+    pub transform: Affine3A,
+    /// The caller's instance id, reported in the hit.
+    pub instance_id: u32,
+    /// Visible to rays whose mask shares a bit with it.
+    pub mask: u8,
+}
+
+/// The closest hit of a ray in a two-level scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceHit {
+    /// The world ray's parameter (infinite for a miss).
+    pub t: f32,
+    /// [`Instance::instance_id`] of the instance hit.
+    pub instance_id: u32,
+    /// [`BottomLevel::id`] of its geometry.
+    pub geometry_id: u32,
+    /// The triangle's index in its geometry; [`PRIM_MISS`] for a miss (or
+    /// another special `PRIM_*` value as single-level traversal reports it).
+    pub prim_index: u32,
+    /// Barycentrics of the hit point.
+    pub u: f32,
+    /// See `u`.
+    pub v: f32,
+    /// The triangle faces the ray (see the module docs).
+    pub front_face: bool,
+    /// Index of the instance hit in the scene's instance list.
+    pub instance_index: u32,
+}
+
+impl InstanceHit {
+    /// No hit.
+    pub const MISS: InstanceHit = InstanceHit {
+        t: f32::INFINITY,
+        instance_id: u32::MAX,
+        geometry_id: u32::MAX,
+        prim_index: PRIM_MISS,
+        u: 0.0,
+        v: 0.0,
+        front_face: false,
+        instance_index: u32::MAX,
+    };
+
+    /// True when a triangle was hit.
+    pub fn is_hit(&self) -> bool {
+        self.prim_index < crate::consts::PRIM_INCOMPLETE
+    }
+}
+
+/// An instance as traversal sees it.
+struct Placed {
+    instance: Instance,
+    /// World to object, rows of a 3×4 matrix.
+    to_object: [[f32; 4]; 3],
+    /// The geometry's box under the transform, widened to hold rounding.
+    world_box: Aabb,
+}
+
+/// A top-level BVH node: a box and either two children or a range of instances.
+#[derive(Clone, Copy, Debug)]
+struct BvhNode {
+    bounds: Aabb,
+    /// Leaf: first index into `order`; interior: the second child (the first follows).
+    index: u32,
+    /// Instances in the leaf; 0 for an interior node.
+    count: u32,
+}
+
+/// A two-level scene: geometries, their instances and the top level.
+pub struct TwoLevelScene {
+    geometries: Vec<BottomLevel>,
+    placed: Vec<Placed>,
+    nodes: Vec<BvhNode>,
+    /// Instance indices in leaf order.
+    order: Vec<u32>,
+}
+
+/// Instances per top-level leaf at most.
+const LEAF_INSTANCES: usize = 2;
+
+impl TwoLevelScene {
+    /// A scene of `geometries` placed by `instances`.
+    ///
+    /// Errors: `Error::InvalidInput` naming the instance for a geometry index out
+    /// of range, a transform that is not finite or not invertible in f32, or a
+    /// world box that overflows.
+    pub fn new(geometries: Vec<BottomLevel>, instances: &[Instance]) -> Result<TwoLevelScene> {
+        let mut scene = TwoLevelScene { geometries, placed: Vec::new(), nodes: Vec::new(), order: Vec::new() };
+        scene.set_instances(instances)?;
+        Ok(scene)
+    }
+
+    /// Replaces the instances and rebuilds the top level only (the geometries'
+    /// trees are kept). On error the scene is unchanged.
+    pub fn set_instances(&mut self, instances: &[Instance]) -> Result<()> {
+        let placed =
+            instances.iter().enumerate().map(|(i, inst)| self.place(i, inst)).collect::<Result<Vec<Placed>>>()?;
+        let mut order: Vec<u32> = (0..placed.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * placed.len().max(1));
+        if !placed.is_empty() {
+            build_bvh(&placed, &mut order, 0, placed.len(), &mut nodes);
+        }
+        (self.placed, self.nodes, self.order) = (placed, nodes, order);
+        Ok(())
+    }
+
+    fn place(&self, i: usize, inst: &Instance) -> Result<Placed> {
+        let bad = |why: String| Error::InvalidInput(format!("instance {i} (id {}): {why}", inst.instance_id));
+        let geometry = self.geometries.get(inst.geometry).ok_or_else(|| {
+            bad(format!("geometry index {} is past the scene's {} geometries", inst.geometry, self.geometries.len()))
+        })?;
+        let m = inst.transform;
+        if !m.matrix3.is_finite() || !m.translation.is_finite() {
+            return Err(bad(format!("the transform is not finite: {m:?}")));
+        }
+        let inverse = DAffine3::from_mat3_translation(m.matrix3.as_dmat3(), m.translation.as_dvec3()).inverse();
+        let rows = [0, 1, 2].map(|r| {
+            let row = inverse.matrix3.row(r);
+            [row.x as f32, row.y as f32, row.z as f32, inverse.translation[r] as f32]
+        });
+        if !rows.iter().flatten().all(|x| x.is_finite()) || m.matrix3.determinant() == 0.0 {
+            return Err(bad("the transform is not invertible in f32".into()));
+        }
+        let b = geometry.tree.bounds;
+        if b.is_empty() {
+            // A geometry without a triangle that can be hit: never entered.
+            return Ok(Placed { instance: *inst, to_object: rows, world_box: Aabb::EMPTY });
+        }
+        let mut world = Aabb::EMPTY;
+        for k in 0..8 {
+            let corner = DVec3::new(
+                if k & 1 == 0 { b.min.x } else { b.max.x } as f64,
+                if k & 2 == 0 { b.min.y } else { b.max.y } as f64,
+                if k & 4 == 0 { b.min.z } else { b.max.z } as f64,
+            );
+            let p = m.matrix3.as_dmat3() * corner + m.translation.as_dvec3();
+            world = world.grow(p.as_vec3());
+        }
+        // Widened so that a world ray whose f32 object ray enters the object box
+        // also enters the world box: 2^-16 of the box's magnitude (the object ray's
+        // rounding is about 2^-22 of the coordinates' magnitude).
+        let margin = (world.min.abs().max(world.max.abs()).max_element() + world.extent().max_element()) / 65536.0;
+        let world_box = Aabb::new(world.min - Vec3::splat(margin), world.max + Vec3::splat(margin));
+        if !world_box.min.is_finite() || !world_box.max.is_finite() {
+            return Err(bad("the instance's world box overflows".into()));
+        }
+        Ok(Placed { instance: *inst, to_object: rows, world_box })
+    }
+
+    /// The geometries.
+    pub fn geometries(&self) -> &[BottomLevel] {
+        &self.geometries
+    }
+
+    /// Instances placed.
+    pub fn instance_count(&self) -> usize {
+        self.placed.len()
+    }
+
+    /// Top-level nodes (for statistics).
+    pub fn top_level_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// The object-space ray of instance `index` for the world ray `ray` (the
+    /// module docs' contract).
+    pub fn object_ray(&self, index: usize, ray: &Ray) -> Ray {
+        let m = &self.placed[index].to_object;
+        let o = Vec3::from(ray.origin);
+        let d = Vec3::from(ray.dir);
+        let row = |r: usize, v: Vec3, w: f32| ((m[r][0] * v.x + m[r][1] * v.y) + m[r][2] * v.z) + m[r][3] * w;
+        let origin = Vec3::new(row(0, o, 1.0), row(1, o, 1.0), row(2, o, 1.0));
+        let dir = Vec3::new(row(0, d, 0.0), row(1, d, 0.0), row(2, d, 0.0));
+        Ray::new(origin, dir, ray.tmin, ray.tmax)
+    }
+
+    /// The closest hit of `ray` among the instances visible to `mask`, each
+    /// traced with `traversal` (its robustness and variant; `Backtrack` and
+    /// `Ropes` are not supported here: no side buffers). Any-hit traversals stop
+    /// at the first instance hit.
+    pub fn trace(&self, ray: &Ray, mask: u8, traversal: Traversal) -> InstanceHit {
+        let mut best = InstanceHit::MISS;
+        if self.nodes.is_empty() || !ray.is_valid() || mask == 0 {
+            if !ray.is_valid() {
+                best.prim_index = crate::consts::PRIM_INVALID;
+            }
+            return best;
+        }
+        let o = Vec3::from(ray.origin);
+        let d = ray.traced_dir();
+        let inv = (Vec3::ONE / d).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX));
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = self.nodes[n as usize];
+            let reach = best.t.min(ray.tmax);
+            let Some(_) = slab(&node.bounds, o, inv, ray.tmin, reach) else { continue };
+            if node.count == 0 {
+                // Nearer child last (popped first).
+                let (a, b) = (n + 1, node.index);
+                let ta = slab(&self.nodes[a as usize].bounds, o, inv, ray.tmin, reach).map_or(f32::INFINITY, |t| t.0);
+                let tb = slab(&self.nodes[b as usize].bounds, o, inv, ray.tmin, reach).map_or(f32::INFINITY, |t| t.0);
+                if ta <= tb {
+                    stack.extend([b, a]);
+                } else {
+                    stack.extend([a, b]);
+                }
+                continue;
+            }
+            for &i in &self.order[node.index as usize..(node.index + node.count) as usize] {
+                let placed = &self.placed[i as usize];
+                if placed.instance.mask & mask == 0 {
+                    continue;
+                }
+                let geometry = &self.geometries[placed.instance.geometry];
+                let mut object = self.object_ray(i as usize, ray);
+                object.tmax = best.t.min(ray.tmax);
+                let (hit, _) = trace_ray(&SceneRef::new(&geometry.tree, &geometry.triangles), &object, traversal);
+                if !hit.is_hit() {
+                    if hit.prim_id != PRIM_MISS && !best.is_hit() {
+                        best.prim_index = hit.prim_id; // incomplete or invalid: reported unless a hit is found
+                    }
+                    continue;
+                }
+                if hit.t <= best.t || !best.is_hit() {
+                    let [v0, v1, v2] = geometry.triangles[hit.prim_id as usize];
+                    let n = (v1 - v0).cross(v2 - v0);
+                    let od = Vec3::from(object.dir);
+                    best = InstanceHit {
+                        t: hit.t,
+                        instance_id: placed.instance.instance_id,
+                        geometry_id: geometry.id,
+                        prim_index: hit.prim_id,
+                        u: hit.u,
+                        v: hit.v,
+                        front_face: n.as_dvec3().dot(od.as_dvec3()) < 0.0,
+                        instance_index: i,
+                    };
+                    if traversal.any_hit {
+                        return best;
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// The world ray's entry and exit of `b` within `[tmin, tmax]`, conservatively
+/// (the far bound widened by 1 + 3·2^-23), or `None`.
+fn slab(b: &Aabb, o: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
+    let (mut t0, mut t1) = (tmin, tmax);
+    for a in 0..3 {
+        let (mut near, mut far) = ((b.min[a] - o[a]) * inv[a], (b.max[a] - o[a]) * inv[a]);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        // An origin inside the slab with a zero direction component: 0 · inf = NaN.
+        if near.is_nan() || far.is_nan() {
+            if o[a] < b.min[a] || o[a] > b.max[a] {
+                return None;
+            }
+            continue;
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far * (1.0 + 3.0 * f32::EPSILON));
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
+/// Builds the BVH over `order[lo..hi]` (median split on the longest axis of
+/// the centroids), appending depth-first; returns the node's index.
+fn build_bvh(placed: &[Placed], order: &mut [u32], lo: usize, hi: usize, nodes: &mut Vec<BvhNode>) -> u32 {
+    let bounds = order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.union(placed[i as usize].world_box));
+    let index = nodes.len() as u32;
+    if hi - lo <= LEAF_INSTANCES {
+        nodes.push(BvhNode { bounds, index: lo as u32, count: (hi - lo) as u32 });
+        return index;
+    }
+    let centroids = order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.grow(placed[i as usize].world_box.center()));
+    let e = centroids.extent();
+    let axis = if e.x >= e.y && e.x >= e.z {
+        0
+    } else if e.y >= e.z {
+        1
+    } else {
+        2
+    };
+    let mid = (lo + hi) / 2;
+    order[lo..hi].select_nth_unstable_by(mid - lo, |&a, &b| {
+        let (ca, cb) = (placed[a as usize].world_box.center()[axis], placed[b as usize].world_box.center()[axis]);
+        ca.total_cmp(&cb)
+    });
+    nodes.push(BvhNode { bounds, index: 0, count: 0 });
+    build_bvh(placed, order, lo, mid, nodes);
+    let second = build_bvh(placed, order, mid, hi, nodes);
+    nodes[index as usize].index = second;
+    index
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,306 @@
+//! Tests of two-level scenes (src/twolevel.rs): the contract against the exact
+//! reference on instanced scenes, front faces, masks, updates and errors.
+
+use glam::{Mat3, Quat};
+
+use super::*;
+use crate::exact::{closest_exact, judge, Exact, Verdict};
+use crate::geom::Hit;
+use crate::kdtree::traverse::Variant;
+use crate::kdtree::BuildConfig;
+
+/// A closed, bumpy sphere of shared vertices: edges and vertices everywhere.
+fn sphere(rings: usize, segments: usize) -> Vec<[Vec3; 3]> {
+    let p = |i: usize, j: usize| {
+        let theta = std::f32::consts::PI * i as f32 / rings as f32;
+        let phi = std::f32::consts::TAU * (j % segments) as f32 / segments as f32;
+        let r = 1.0 + 0.1 * ((3 * i + 5 * j) % 7) as f32 / 7.0;
+        Vec3::new(r * theta.sin() * phi.cos(), r * theta.cos(), r * theta.sin() * phi.sin())
+    };
+    let mut tris = Vec::new();
+    for i in 0..rings {
+        for j in 0..segments {
+            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+            if i > 0 {
+                tris.push([a, c, d]);
+            }
+            if i + 1 < rings {
+                tris.push([a, b, c]);
+            }
+        }
+    }
+    tris
+}
+
+fn bottom(id: u32, triangles: Vec<[Vec3; 3]>) -> BottomLevel {
+    let tree = KdTree::build(&triangles, &BuildConfig::default());
+    BottomLevel { id, triangles, tree }
+}
+
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((self.0 >> 40) as f32) / (1u64 << 24) as f32
+    }
+    fn unit(&mut self) -> Vec3 {
+        loop {
+            let v = Vec3::new(self.next(), self.next(), self.next()) * 2.0 - Vec3::ONE;
+            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
+                return v.normalize();
+            }
+        }
+    }
+}
+
+/// The categories of placements the contract must hold through.
+fn placements(category: &str, rng: &mut Rng) -> Vec<Instance> {
+    let rotation = |rng: &mut Rng| Quat::from_axis_angle(rng.unit(), std::f32::consts::TAU * rng.next());
+    let at = |i: usize| Vec3::new(3.0 * (i % 4) as f32, 3.0 * (i / 4) as f32, 0.0);
+    (0..8)
+        .map(|i| {
+            let transform = match category {
+                "rotated" => Affine3A::from_rotation_translation(rotation(rng), at(i)),
+                "scaled" => Affine3A::from_scale_rotation_translation(
+                    Vec3::new(0.2 + rng.next(), 1.0 + 4.0 * rng.next(), 0.05 + rng.next()),
+                    rotation(rng),
+                    at(i),
+                ),
+                "mirrored" => Affine3A::from_mat3_translation(
+                    Mat3::from_quat(rotation(rng)) * Mat3::from_diagonal(Vec3::new(-1.0, 1.0, 1.0)),
+                    at(i),
+                ),
+                "far" => Affine3A::from_rotation_translation(rotation(rng), at(i) + Vec3::new(3.0e6, -1.0e6, 2.0e6)),
+                // Pairs placed at the same spot: every hit is an exact tie of two instances.
+                "overlapping" => Affine3A::from_rotation_translation(Quat::IDENTITY, at(i / 2) * 0.5),
+                other => panic!("no category {other}"),
+            };
+            Instance { geometry: i % 2, transform, instance_id: 100 + i as u32, mask: 0xff }
+        })
+        .collect()
+}
+
+/// Rays aimed at triangle edges and vertices of random instances (hard), and
+/// random rays through the scene box.
+fn rays(scene: &TwoLevelScene, instances: &[Instance], rng: &mut Rng, count: usize) -> Vec<Ray> {
+    let world = scene.placed.iter().fold(Aabb::EMPTY, |b, p| b.union(p.world_box));
+    let size = world.extent().max_element();
+    (0..count)
+        .map(|k| {
+            let inst = &instances[(rng.next() * instances.len() as f32) as usize % instances.len()];
+            let tris = &scene.geometries[inst.geometry].triangles;
+            let [v0, v1, v2] = tris[(rng.next() * tris.len() as f32) as usize % tris.len()];
+            let target_obj = match k % 3 {
+                0 => v0 + (v1 - v0) * rng.next(), // an edge
+                1 => v1,                          // a vertex
+                _ => (v0 + v1 + v2) / 3.0,
+            };
+            let target = inst.transform.transform_point3(target_obj);
+            let origin = if k % 5 == 4 {
+                world.min + (world.max - world.min) * Vec3::new(rng.next(), rng.next(), rng.next())
+            } else {
+                target + rng.unit() * size * (0.2 + rng.next())
+            };
+            Ray::new(origin, target - origin, 0.0, f32::INFINITY)
+        })
+        .collect()
+}
+
+/// The verdict on a two-level answer: judged on the object ray of the instance
+/// it names against that instance's exact answer, and closest among the exact
+/// answers of every visible instance's object ray (within 2^-20 of `t`).
+fn verdict(scene: &TwoLevelScene, ray: &Ray, hit: &InstanceHit) -> Verdict {
+    let exact: Vec<(Ray, Exact)> = (0..scene.instance_count())
+        .map(|i| {
+            let object = scene.object_ray(i, ray);
+            let g = &scene.geometries[scene.placed[i].instance.geometry];
+            let e = closest_exact(&g.triangles, &object);
+            (object, e)
+        })
+        .collect();
+    let nearest = exact
+        .iter()
+        .filter_map(|(_, e)| match e {
+            Exact::Hit { t, .. } => Some(*t),
+            _ => None,
+        })
+        .min_by(f64::total_cmp);
+    if !hit.is_hit() {
+        if hit.prim_index != PRIM_MISS {
+            return Verdict::BadAnswer;
+        }
+        // Worst verdict over the instances, each judged on a miss.
+        let mut worst = Verdict::BothMiss;
+        for (i, (object, e)) in exact.iter().enumerate() {
+            let g = &scene.geometries[scene.placed[i].instance.geometry];
+            let (v, _) = judge(&g.triangles, object, &Hit::MISS, e);
+            if v.is_serious() || (!v.agrees() && worst.agrees()) {
+                worst = v;
+            }
+        }
+        return worst;
+    }
+    let k = hit.instance_index as usize;
+    let g = &scene.geometries[scene.placed[k].instance.geometry];
+    let h = Hit { t: hit.t, prim_id: hit.prim_index, u: hit.u, v: hit.v };
+    let (v, _) = judge(&g.triangles, &exact[k].0, &h, &exact[k].1);
+    match (&exact[k].1, nearest) {
+        (Exact::Hit { t, .. }, Some(n)) if v.agrees() && *t > n * (1.0 + 1.0 / 1048576.0) + 1e-30 => {
+            Verdict::MissedHit // a farther instance answered
+        }
+        _ => v,
+    }
+}
+
+/// Every placement category, robust `stack` and `short-stack`, closest hit: ≥ 99.5 %
+/// agreement with the exact answers of the object rays, nothing serious.
+#[test]
+fn instanced_hits_are_exact_for_their_object_rays() {
+    let geometries = vec![bottom(7, sphere(10, 16)), bottom(9, sphere(6, 9))];
+    let mut scene = TwoLevelScene::new(geometries, &[]).unwrap();
+    let mut rng = Rng(3);
+    for category in ["rotated", "scaled", "mirrored", "far", "overlapping"] {
+        let instances = placements(category, &mut rng);
+        scene.set_instances(&instances).unwrap();
+        let rays = rays(&scene, &instances, &mut rng, 300);
+        for variant in [Variant::Stack, Variant::ShortStack] {
+            let traversal = Traversal::closest(variant);
+            let (mut agree, mut serious, mut hits) = (0, 0, 0);
+            for ray in &rays {
+                let hit = scene.trace(ray, 0xff, traversal);
+                hits += usize::from(hit.is_hit());
+                let v = verdict(&scene, ray, &hit);
+                agree += usize::from(v.agrees());
+                if v.is_serious() {
+                    serious += 1;
+                    eprintln!("{category} {variant:?}: {} on {ray:?}: {hit:?}", v.name());
+                }
+            }
+            let share = agree as f64 / rays.len() as f64;
+            eprintln!("{category} {variant:?}: {:.1} % agree, {hits} hits, {serious} serious", 100.0 * share);
+            assert!(
+                share >= 0.995 && serious == 0,
+                "{category} {variant:?}: {agree}/{} agree, {serious} serious",
+                rays.len()
+            );
+            assert!(hits > rays.len() / 2, "{category}: the aimed rays should mostly hit ({hits})");
+        }
+    }
+}
+
+/// One instance with the identity transform traces exactly as its geometry alone.
+#[test]
+fn an_identity_instance_is_the_single_level_trace() {
+    let tris = sphere(8, 12);
+    let single = KdTree::build(&tris, &BuildConfig::default());
+    let scene = TwoLevelScene::new(
+        vec![bottom(1, tris.clone())],
+        &[Instance { geometry: 0, transform: Affine3A::IDENTITY, instance_id: 5, mask: 1 }],
+    )
+    .unwrap();
+    let mut rng = Rng(8);
+    let view = SceneRef::new(&single, &tris);
+    for _ in 0..500 {
+        let origin = rng.unit() * 3.0;
+        let ray = Ray::new(origin, rng.unit() - origin * 0.3, 0.0, f32::INFINITY);
+        let (h, _) = trace_ray(&view, &ray, Traversal::closest(Variant::Stack));
+        let i = scene.trace(&ray, 1, Traversal::closest(Variant::Stack));
+        assert_eq!(
+            (i.t.to_bits(), i.prim_index, i.u.to_bits(), i.v.to_bits()),
+            (h.t.to_bits(), h.prim_id, h.u.to_bits(), h.v.to_bits())
+        );
+        if i.is_hit() {
+            assert_eq!((i.instance_id, i.geometry_id, i.instance_index), (5, 1, 0));
+        }
+    }
+}
+
+/// Front faces are decided in object space: a mirroring instance does not flip them.
+#[test]
+fn front_faces_follow_object_space_winding_and_masks_hide_instances() {
+    // Seen from -z looking along +z, clockwise in a left-handed frame: front.
+    let tri = vec![[Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0), Vec3::new(1.0, 0.0, 0.0)]];
+    let mirror =
+        Affine3A::from_mat3_translation(Mat3::from_diagonal(Vec3::new(-1.0, 1.0, 1.0)), Vec3::new(5.0, 0.0, 0.0));
+    let instances = [
+        Instance { geometry: 0, transform: Affine3A::IDENTITY, instance_id: 1, mask: 0b01 },
+        Instance { geometry: 0, transform: mirror, instance_id: 2, mask: 0b10 },
+    ];
+    let scene = TwoLevelScene::new(vec![bottom(0, tri)], &instances).unwrap();
+    let closest = Traversal::closest(Variant::Stack);
+    let toward = |x: f32, z: f32, dz: f32| Ray::new(Vec3::new(x, 0.25, z), Vec3::new(0.0, 0.0, dz), 0.0, f32::INFINITY);
+    let front = scene.trace(&toward(0.25, -1.0, 1.0), 0xff, closest);
+    assert!(front.is_hit() && front.front_face && front.instance_id == 1, "{front:?}");
+    let back = scene.trace(&toward(0.25, 1.0, -1.0), 0xff, closest);
+    assert!(back.is_hit() && !back.front_face, "{back:?}");
+    // The mirrored copy (x in [4, 5]) keeps the object-space facing.
+    let mirrored = scene.trace(&toward(4.75, -1.0, 1.0), 0xff, closest);
+    assert!(mirrored.is_hit() && mirrored.front_face && mirrored.instance_id == 2, "{mirrored:?}");
+    // Masks: instance 2 is hidden from rays of mask 0b01, instance 1 from 0b10.
+    assert!(!scene.trace(&toward(4.75, -1.0, 1.0), 0b01, closest).is_hit());
+    assert!(!scene.trace(&toward(0.25, -1.0, 1.0), 0b10, closest).is_hit());
+    assert!(scene
+        .trace(&toward(0.25, -1.0, 1.0), 0b11, Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) })
+        .is_hit());
+}
+
+#[test]
+fn bad_instances_are_clear_errors_and_leave_the_scene_unchanged() {
+    let mut scene = TwoLevelScene::new(vec![bottom(0, sphere(4, 6))], &[]).unwrap();
+    let ok = Instance { geometry: 0, transform: Affine3A::IDENTITY, instance_id: 1, mask: 1 };
+    scene.set_instances(&[ok]).unwrap();
+    let mut message = |inst: Instance| match scene.set_instances(&[ok, inst]) {
+        Err(Error::InvalidInput(m)) => m,
+        other => panic!("expected an error, got {:?}", other.map(|_| ())),
+    };
+    assert!(message(Instance { geometry: 3, ..ok }).contains("geometry index 3"));
+    let flat = Affine3A::from_mat3(Mat3::from_diagonal(Vec3::new(1.0, 0.0, 1.0)));
+    assert!(message(Instance { transform: flat, ..ok }).contains("not invertible"));
+    let nan = Affine3A::from_translation(Vec3::new(f32::NAN, 0.0, 0.0));
+    assert!(message(Instance { transform: nan, ..ok }).contains("not finite"));
+    let huge = Affine3A::from_scale(Vec3::splat(3e38));
+    assert!(message(Instance { transform: huge, ..ok }).contains("overflows"));
+    assert_eq!(scene.instance_count(), 1, "the scene is unchanged");
+    // Empty scenes and invalid rays.
+    scene.set_instances(&[]).unwrap();
+    let ray = Ray::new(Vec3::ZERO, Vec3::X, 0.0, 1.0);
+    assert_eq!(scene.trace(&ray, 1, Traversal::closest(Variant::Stack)).prim_index, PRIM_MISS);
+    scene.set_instances(&[ok]).unwrap();
+    let nan_ray = Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 1.0);
+    assert_eq!(scene.trace(&nan_ray, 1, Traversal::closest(Variant::Stack)).prim_index, crate::consts::PRIM_INVALID);
+}
+
+/// Top-level rebuild time for 10, 1,000 and 100,000 instances (a measurement,
+/// not a test: `cargo test --release --lib top_level_rebuild -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn top_level_rebuild_times() {
+    let mut scene = TwoLevelScene::new(vec![bottom(0, sphere(8, 12))], &[]).unwrap();
+    let mut rng = Rng(1);
+    for n in [10usize, 1000, 100_000] {
+        let instances: Vec<Instance> = (0..n)
+            .map(|i| Instance {
+                geometry: 0,
+                transform: Affine3A::from_rotation_translation(
+                    Quat::from_axis_angle(rng.unit(), rng.next() * 6.0),
+                    Vec3::new(rng.next(), rng.next(), rng.next()) * (n as f32).cbrt() * 4.0,
+                ),
+                instance_id: i as u32,
+                mask: 0xff,
+            })
+            .collect();
+        let mut times = Vec::new();
+        for _ in 0..5 {
+            let start = std::time::Instant::now();
+            scene.set_instances(&instances).unwrap();
+            times.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+        times.sort_by(f64::total_cmp);
+        eprintln!(
+            "{n} instances: top-level rebuild {:.3} ms (median of 5), {} nodes",
+            times[2],
+            scene.top_level_nodes()
+        );
+    }
+}
