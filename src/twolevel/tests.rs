@@ -4,7 +4,7 @@
 use glam::{Mat3, Quat};
 
 use super::*;
-use crate::exact::{closest_exact, judge, Exact, Verdict};
+use crate::exact::{closest_exact, judge, judge_any, Exact, Verdict};
 use crate::geom::Hit;
 use crate::kdtree::traverse::Variant;
 use crate::kdtree::BuildConfig;
@@ -177,6 +177,9 @@ fn instanced_hits_are_exact_for_their_object_rays() {
                     eprintln!("{category} {variant:?}: {} on {ray:?}: {hit:?}", v.name());
                 }
             }
+            // Self-check: the verdict catches a lost hit and a farther instance.
+            let ray = rays.iter().find(|r| scene.trace(r, 0xff, traversal).is_hit()).unwrap();
+            assert!(verdict(&scene, ray, &InstanceHit::MISS).is_serious());
             let share = agree as f64 / rays.len() as f64;
             eprintln!("{category} {variant:?}: {:.1} % agree, {hits} hits, {serious} serious", 100.0 * share);
             assert!(
@@ -186,6 +189,61 @@ fn instanced_hits_are_exact_for_their_object_rays() {
             );
             assert!(hits > rays.len() / 2, "{category}: the aimed rays should mostly hit ({hits})");
         }
+    }
+}
+
+/// The any-hit verdict: an occluder must really be hit by its instance's object
+/// ray within the segment; a free segment must be free for every instance.
+fn verdict_any(scene: &TwoLevelScene, ray: &Ray, hit: &InstanceHit) -> Verdict {
+    let judge_instance = |i: usize, h: &Hit| {
+        let object = scene.object_ray(i, ray);
+        let g = &scene.geometries[scene.placed[i].instance.geometry];
+        judge_any(&g.triangles, &object, h, &closest_exact(&g.triangles, &object))
+    };
+    if hit.is_hit() {
+        let h = Hit { t: hit.t, prim_id: hit.prim_index, u: hit.u, v: hit.v };
+        return judge_instance(hit.instance_index as usize, &h);
+    }
+    if hit.prim_index != PRIM_MISS {
+        return Verdict::BadAnswer;
+    }
+    let mut worst = Verdict::BothMiss;
+    for i in 0..scene.instance_count() {
+        let v = judge_instance(i, &Hit::MISS);
+        if v.is_serious() || (!v.agrees() && worst.agrees()) {
+            worst = v;
+        }
+    }
+    worst
+}
+
+/// Shadow-ray segments ending before, at and after aimed targets (t = 1 at the
+/// target), any hit, every category: the same floors.
+#[test]
+fn instanced_any_hits_are_exact_for_their_object_rays() {
+    let geometries = vec![bottom(7, sphere(10, 16)), bottom(9, sphere(6, 9))];
+    let mut scene = TwoLevelScene::new(geometries, &[]).unwrap();
+    let mut rng = Rng(5);
+    for category in ["rotated", "scaled", "mirrored", "far", "overlapping"] {
+        let instances = placements(category, &mut rng);
+        scene.set_instances(&instances).unwrap();
+        let mut rays = rays(&scene, &instances, &mut rng, 300);
+        for (k, ray) in rays.iter_mut().enumerate() {
+            ray.tmax = [0.5, 0.999, 1.0, 1.001, 2.0][k % 5];
+        }
+        let traversal = Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) };
+        let (mut agree, mut serious, mut hits) = (0, 0, 0);
+        for ray in &rays {
+            let hit = scene.trace(ray, 0xff, traversal);
+            hits += usize::from(hit.is_hit());
+            let v = verdict_any(&scene, ray, &hit);
+            agree += usize::from(v.agrees());
+            serious += usize::from(v.is_serious());
+        }
+        let share = agree as f64 / rays.len() as f64;
+        eprintln!("{category} any hit: {:.1} % agree, {hits} occluded, {serious} serious", 100.0 * share);
+        assert!(share >= 0.995 && serious == 0, "{category}: {agree}/{} agree, {serious} serious", rays.len());
+        assert!(hits > rays.len() / 5 && hits < rays.len(), "{category}: {hits} occluded of {}", rays.len());
     }
 }
 
