@@ -47,6 +47,14 @@ pub struct BottomLevel {
     pub tree: KdTree,
 }
 
+impl BottomLevel {
+    /// A geometry with its kd-tree built by `config`.
+    pub fn new(id: u32, triangles: Vec<[Vec3; 3]>, config: &crate::kdtree::BuildConfig) -> BottomLevel {
+        let tree = KdTree::build(&triangles, config);
+        BottomLevel { id, triangles, tree }
+    }
+}
+
 /// One placement of a geometry.
 #[derive(Clone, Copy, Debug)]
 pub struct Instance {
@@ -135,10 +143,16 @@ const LEAF_INSTANCES: usize = 2;
 impl TwoLevelScene {
     /// A scene of `geometries` placed by `instances`.
     ///
-    /// Errors: `Error::InvalidInput` naming the instance for a geometry index out
-    /// of range, a transform that is not finite or not invertible in f32, or a
-    /// world box that overflows.
+    /// Errors: `Error::InvalidInput` naming the geometry whose tree does not fit
+    /// its triangles ([`KdTree::check`]), or the instance for a geometry index
+    /// out of range, a transform that is not finite or not invertible in f32, or
+    /// a world box that overflows.
     pub fn new(geometries: Vec<BottomLevel>, instances: &[Instance]) -> Result<TwoLevelScene> {
+        for (i, g) in geometries.iter().enumerate() {
+            g.tree.check(g.triangles.len()).map_err(|e| {
+                Error::InvalidInput(format!("geometry {i} (id {}): the kd-tree does not fit its triangles: {e}", g.id))
+            })?;
+        }
         let mut scene = TwoLevelScene { geometries, placed: Vec::new(), nodes: Vec::new(), order: Vec::new() };
         scene.set_instances(instances)?;
         Ok(scene)

@@ -33,8 +33,7 @@ fn sphere(rings: usize, segments: usize) -> Vec<[Vec3; 3]> {
 }
 
 fn bottom(id: u32, triangles: Vec<[Vec3; 3]>) -> BottomLevel {
-    let tree = KdTree::build(&triangles, &BuildConfig::default());
-    BottomLevel { id, triangles, tree }
+    BottomLevel::new(id, triangles, &BuildConfig::default())
 }
 
 struct Rng(u64);
@@ -320,6 +319,17 @@ fn bad_instances_are_clear_errors_and_leave_the_scene_unchanged() {
     let huge = Affine3A::from_scale(Vec3::splat(3e38));
     assert!(message(Instance { transform: huge, ..ok }).contains("overflows"));
     assert_eq!(scene.instance_count(), 1, "the scene is unchanged");
+    // A geometry without triangles is placed and never hit.
+    let empty = TwoLevelScene::new(vec![bottom(5, Vec::new())], &[ok]).unwrap();
+    let probe = Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z, 0.0, f32::INFINITY);
+    assert_eq!(empty.trace(&probe, 1, Traversal::closest(Variant::Stack)).prim_index, PRIM_MISS);
+    // A tree that does not fit its triangles.
+    let mut wrong = bottom(4, sphere(4, 6));
+    wrong.triangles.truncate(3);
+    match TwoLevelScene::new(vec![wrong], &[ok]) {
+        Err(Error::InvalidInput(m)) => assert!(m.contains("geometry 0 (id 4)"), "{m}"),
+        other => panic!("expected an error, got {:?}", other.map(|_| ())),
+    }
     // Empty scenes and invalid rays.
     scene.set_instances(&[]).unwrap();
     let ray = Ray::new(Vec3::ZERO, Vec3::X, 0.0, 1.0);
