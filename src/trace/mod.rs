@@ -277,7 +277,10 @@ impl Tracer {
     /// `cmd` is a command buffer of the context's device, from a pool of a
     /// compute-capable queue family, in the recording state, outside a render
     /// pass. `cmd` must complete before `release_retired` is called with a value
-    /// of `frame` or more, and before the tracer is dropped.
+    /// of `frame` or more, and before the tracer is dropped. Until `cmd` has been
+    /// submitted and has completed, trace the new scene only from command buffers
+    /// submitted after it on the same queue: [`Tracer::trace`] submits on its own
+    /// and would read the buffers before their copies ran.
     pub unsafe fn record_replace_scene(
         &mut self,
         cmd: vk::CommandBuffer,
