@@ -34,8 +34,10 @@ use glam::{Affine3A, DAffine3, DVec3, Vec3};
 use crate::consts::PRIM_MISS;
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Ray};
+use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{trace_ray, SceneRef, Traversal};
-use crate::kdtree::KdTree;
+use crate::kdtree::{BuildConfig, KdTree};
+use crate::scene::Geometry;
 
 /// A geometry with its own kd-tree, in its object space.
 pub struct BottomLevel {
@@ -49,9 +51,20 @@ pub struct BottomLevel {
 
 impl BottomLevel {
     /// A geometry with its kd-tree built by `config`.
-    pub fn new(id: u32, triangles: Vec<[Vec3; 3]>, config: &crate::kdtree::BuildConfig) -> BottomLevel {
+    pub fn new(id: u32, triangles: Vec<[Vec3; 3]>, config: &BuildConfig) -> BottomLevel {
         let tree = KdTree::build(&triangles, config);
         BottomLevel { id, triangles, tree }
+    }
+
+    /// A geometry as engines hold it ([`Geometry`]: `&[Vec3]` or strided vertex
+    /// bytes, optional `u16`/`u32` indices), its id kept, its triangles checked as
+    /// `Scene::from_geometries` checks them. A transform set on the geometry is
+    /// applied to its vertices (Vulkan's geometry transform); place it with
+    /// [`Instance`]s.
+    pub fn from_geometry(geometry: &Geometry, config: &BuildConfig) -> Result<BottomLevel> {
+        let mut triangles = Vec::new();
+        geometry.world_triangles(&mut triangles)?;
+        Ok(BottomLevel::new(geometry.id, triangles, config))
     }
 }
 
@@ -116,6 +129,9 @@ struct Placed {
     to_object: [[f32; 4]; 3],
     /// The geometry's box under the transform, widened to hold rounding.
     world_box: Aabb,
+    /// ‖transform‖ · ‖inverse‖ (max-row norms): how much the object ray's
+    /// rounding may move it, relative to the origin's magnitude, in world space.
+    condition: f32,
 }
 
 /// A top-level BVH node: a box and either two children or a range of instances.
@@ -126,11 +142,15 @@ struct BvhNode {
     index: u32,
     /// Instances in the leaf; 0 for an interior node.
     count: u32,
+    /// The largest `Placed::condition` below.
+    condition: f32,
 }
 
 /// A two-level scene: geometries, their instances and the top level.
 pub struct TwoLevelScene {
     geometries: Vec<BottomLevel>,
+    /// Each geometry's side buffers (parents, node boxes, ropes) for `Backtrack` and `Ropes`.
+    links: Vec<TreeLinks>,
     placed: Vec<Placed>,
     nodes: Vec<BvhNode>,
     /// Instance indices in leaf order.
@@ -153,7 +173,8 @@ impl TwoLevelScene {
                 Error::InvalidInput(format!("geometry {i} (id {}): the kd-tree does not fit its triangles: {e}", g.id))
             })?;
         }
-        let mut scene = TwoLevelScene { geometries, placed: Vec::new(), nodes: Vec::new(), order: Vec::new() };
+        let links = geometries.iter().map(|g| TreeLinks::new(&g.tree.nodes, g.tree.bounds)).collect();
+        let mut scene = TwoLevelScene { geometries, links, placed: Vec::new(), nodes: Vec::new(), order: Vec::new() };
         scene.set_instances(instances)?;
         Ok(scene)
     }
@@ -190,9 +211,14 @@ impl TwoLevelScene {
             return Err(bad("the transform is not invertible in f32".into()));
         }
         let b = geometry.tree.bounds;
+        let norm =
+            |rows: [[f64; 3]; 3]| rows.iter().map(|r| r.iter().map(|x| x.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let forward = m.matrix3.as_dmat3().transpose().to_cols_array_2d();
+        let backward = inverse.matrix3.transpose().to_cols_array_2d();
+        let condition = (norm(forward) * norm(backward)) as f32;
         if b.is_empty() {
             // A geometry without a triangle that can be hit: never entered.
-            return Ok(Placed { instance: *inst, to_object: rows, world_box: Aabb::EMPTY });
+            return Ok(Placed { instance: *inst, to_object: rows, world_box: Aabb::EMPTY, condition });
         }
         let mut world = Aabb::EMPTY;
         for k in 0..8 {
@@ -212,7 +238,7 @@ impl TwoLevelScene {
         if !world_box.min.is_finite() || !world_box.max.is_finite() {
             return Err(bad("the instance's world box overflows".into()));
         }
-        Ok(Placed { instance: *inst, to_object: rows, world_box })
+        Ok(Placed { instance: *inst, to_object: rows, world_box, condition })
     }
 
     /// The geometries.
@@ -243,9 +269,10 @@ impl TwoLevelScene {
     }
 
     /// The closest hit of `ray` among the instances visible to `mask`, each
-    /// traced with `traversal` (its robustness and variant; `Backtrack` and
-    /// `Ropes` are not supported here: no side buffers). Any-hit traversals stop
-    /// at the first instance hit.
+    /// traced with `traversal` (any variant, robust or plain). Any-hit
+    /// traversals stop at the first instance hit. When an instance's traversal
+    /// is cut short the answer is `PRIM_INCOMPLETE` (for any hit, unless another
+    /// instance occludes), never a miss or a possibly farther hit.
     pub fn trace(&self, ray: &Ray, mask: u8, traversal: Traversal) -> InstanceHit {
         let mut best = InstanceHit::MISS;
         if self.nodes.is_empty() || !ray.is_valid() || mask == 0 {
@@ -257,21 +284,27 @@ impl TwoLevelScene {
         let o = Vec3::from(ray.origin);
         let d = ray.traced_dir();
         let inv = (Vec3::ONE / d).clamp(Vec3::splat(-f32::MAX), Vec3::splat(f32::MAX));
+        // The object rays' rounding grows with the origin's magnitude: boxes are
+        // widened by it, times each subtree's condition number (see `Placed`).
+        let far = o.abs().max_element() / 1_048_576.0;
+        let enters = |n: u32, reach: f32| {
+            let node = &self.nodes[n as usize];
+            slab(&node.bounds, far * node.condition, o, d, inv, ray.tmin, reach)
+        };
+        let mut incomplete = false;
         let mut stack = vec![0u32];
         while let Some(n) = stack.pop() {
             let node = self.nodes[n as usize];
             let reach = best.t.min(ray.tmax);
-            let Some(_) = slab(&node.bounds, o, inv, ray.tmin, reach) else { continue };
+            if enters(n, reach).is_none() {
+                continue;
+            }
             if node.count == 0 {
                 // Nearer child last (popped first).
                 let (a, b) = (n + 1, node.index);
-                let ta = slab(&self.nodes[a as usize].bounds, o, inv, ray.tmin, reach).map_or(f32::INFINITY, |t| t.0);
-                let tb = slab(&self.nodes[b as usize].bounds, o, inv, ray.tmin, reach).map_or(f32::INFINITY, |t| t.0);
-                if ta <= tb {
-                    stack.extend([b, a]);
-                } else {
-                    stack.extend([a, b]);
-                }
+                let ta = enters(a, reach).map_or(f32::INFINITY, |t| t.0);
+                let tb = enters(b, reach).map_or(f32::INFINITY, |t| t.0);
+                stack.extend(if ta <= tb { [b, a] } else { [a, b] });
                 continue;
             }
             for &i in &self.order[node.index as usize..(node.index + node.count) as usize] {
@@ -279,14 +312,16 @@ impl TwoLevelScene {
                 if placed.instance.mask & mask == 0 {
                     continue;
                 }
-                let geometry = &self.geometries[placed.instance.geometry];
+                let g = placed.instance.geometry;
+                let geometry = &self.geometries[g];
                 let mut object = self.object_ray(i as usize, ray);
                 object.tmax = best.t.min(ray.tmax);
-                let (hit, _) = trace_ray(&SceneRef::new(&geometry.tree, &geometry.triangles), &object, traversal);
+                let view = SceneRef::new(&geometry.tree, &geometry.triangles).with_links(&self.links[g]);
+                let (hit, _) = trace_ray(&view, &object, traversal);
                 if !hit.is_hit() {
-                    if hit.prim_id != PRIM_MISS && !best.is_hit() {
-                        best.prim_index = hit.prim_id; // incomplete or invalid: reported unless a hit is found
-                    }
+                    // Cut short (or an object ray the transform made invalid): an
+                    // answer of this instance is unknown.
+                    incomplete |= hit.prim_id != PRIM_MISS;
                     continue;
                 }
                 if hit.t <= best.t || !best.is_hit() {
@@ -309,28 +344,31 @@ impl TwoLevelScene {
                 }
             }
         }
+        // As single-level traversal: a closest hit is not claimed when an instance
+        // that might hold a closer one did not finish.
+        if incomplete {
+            best = InstanceHit { t: f32::NAN, prim_index: crate::consts::PRIM_INCOMPLETE, ..InstanceHit::MISS };
+        }
         best
     }
 }
 
-/// The world ray's entry and exit of `b` within `[tmin, tmax]`, conservatively
-/// (the far bound widened by 1 + 3·2^-23), or `None`.
-fn slab(b: &Aabb, o: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
+/// The world ray's entry and exit of `b` widened by `widen` on every side,
+/// within `[tmin, tmax]`, conservatively (the far bound widened by 1 + 3·2^-23),
+/// or `None`.
+fn slab(b: &Aabb, widen: f32, o: Vec3, d: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
     let (mut t0, mut t1) = (tmin, tmax);
     for a in 0..3 {
-        let (mut near, mut far) = ((b.min[a] - o[a]) * inv[a], (b.max[a] - o[a]) * inv[a]);
-        if near > far {
-            std::mem::swap(&mut near, &mut far);
-        }
-        // An origin inside the slab with a zero direction component: 0 · inf = NaN.
-        if near.is_nan() || far.is_nan() {
-            if o[a] < b.min[a] || o[a] > b.max[a] {
+        let (lo, hi) = (b.min[a] - widen, b.max[a] + widen);
+        if d[a] == 0.0 {
+            if o[a] < lo || o[a] > hi {
                 return None;
             }
             continue;
         }
-        t0 = t0.max(near);
-        t1 = t1.min(far * (1.0 + 3.0 * f32::EPSILON));
+        let (ta, tb) = ((lo - o[a]) * inv[a], (hi - o[a]) * inv[a]);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb) * (1.0 + 3.0 * f32::EPSILON));
     }
     (t0 <= t1).then_some((t0, t1))
 }
@@ -340,8 +378,9 @@ fn slab(b: &Aabb, o: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)
 fn build_bvh(placed: &[Placed], order: &mut [u32], lo: usize, hi: usize, nodes: &mut Vec<BvhNode>) -> u32 {
     let bounds = order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.union(placed[i as usize].world_box));
     let index = nodes.len() as u32;
+    let condition = order[lo..hi].iter().map(|&i| placed[i as usize].condition).fold(0.0, f32::max);
     if hi - lo <= LEAF_INSTANCES {
-        nodes.push(BvhNode { bounds, index: lo as u32, count: (hi - lo) as u32 });
+        nodes.push(BvhNode { bounds, index: lo as u32, count: (hi - lo) as u32, condition });
         return index;
     }
     let centroids = order[lo..hi].iter().fold(Aabb::EMPTY, |b, &i| b.grow(placed[i as usize].world_box.center()));
@@ -358,11 +397,94 @@ fn build_bvh(placed: &[Placed], order: &mut [u32], lo: usize, hi: usize, nodes: 
         let (ca, cb) = (placed[a as usize].world_box.center()[axis], placed[b as usize].world_box.center()[axis]);
         ca.total_cmp(&cb)
     });
-    nodes.push(BvhNode { bounds, index: 0, count: 0 });
+    nodes.push(BvhNode { bounds, index: 0, count: 0, condition });
     build_bvh(placed, order, lo, mid, nodes);
     let second = build_bvh(placed, order, mid, hi, nodes);
     nodes[index as usize].index = second;
     index
+}
+
+/// Verdicts on two-level answers against the exact reference (feature `exact`).
+#[cfg(any(feature = "exact", test))]
+impl TwoLevelScene {
+    /// The verdict on a closest-hit answer: judged ([`crate::exact::judge`]) on
+    /// the object ray of the instance it names against that instance's exact
+    /// answer, and a farther instance's hit (beyond 2^-20 of the nearest exact
+    /// `t` over every visible instance's object ray) is a missed hit; a miss is
+    /// judged against every instance (the worst verdict).
+    pub fn verdict(&self, ray: &Ray, hit: &InstanceHit) -> crate::exact::Verdict {
+        use crate::exact::{closest_exact, judge, Exact, Verdict};
+        use crate::geom::Hit;
+        let exact: Vec<(Ray, Exact)> = (0..self.instance_count())
+            .map(|i| {
+                let object = self.object_ray(i, ray);
+                (object, closest_exact(&self.geometry_of(i).triangles, &object))
+            })
+            .collect();
+        if !hit.is_hit() {
+            if hit.prim_index != PRIM_MISS {
+                return Verdict::BadAnswer;
+            }
+            let verdicts = exact
+                .iter()
+                .enumerate()
+                .map(|(i, (object, e))| judge(&self.geometry_of(i).triangles, object, &Hit::MISS, e).0);
+            return worst(verdicts);
+        }
+        let nearest = exact
+            .iter()
+            .filter_map(|(_, e)| match e {
+                Exact::Hit { t, .. } => Some(*t),
+                _ => None,
+            })
+            .min_by(f64::total_cmp);
+        let k = hit.instance_index as usize;
+        let h = Hit { t: hit.t, prim_id: hit.prim_index, u: hit.u, v: hit.v };
+        let (v, _) = judge(&self.geometry_of(k).triangles, &exact[k].0, &h, &exact[k].1);
+        match (&exact[k].1, nearest) {
+            (Exact::Hit { t, .. }, Some(n)) if v.agrees() && *t > n * (1.0 + 1.0 / 1_048_576.0) + 1e-30 => {
+                Verdict::MissedHit
+            }
+            _ => v,
+        }
+    }
+
+    /// The verdict on an any-hit answer ([`crate::exact::judge_any`]): an
+    /// occluder must really be hit by its instance's object ray within the
+    /// segment; a free segment must be free for every instance.
+    pub fn verdict_any(&self, ray: &Ray, hit: &InstanceHit) -> crate::exact::Verdict {
+        use crate::exact::{closest_exact, judge_any, Verdict};
+        use crate::geom::Hit;
+        let judge_instance = |i: usize, h: &Hit| {
+            let object = self.object_ray(i, ray);
+            let triangles = &self.geometry_of(i).triangles;
+            judge_any(triangles, &object, h, &closest_exact(triangles, &object))
+        };
+        if hit.is_hit() {
+            let h = Hit { t: hit.t, prim_id: hit.prim_index, u: hit.u, v: hit.v };
+            return judge_instance(hit.instance_index as usize, &h);
+        }
+        if hit.prim_index != PRIM_MISS {
+            return Verdict::BadAnswer;
+        }
+        worst((0..self.instance_count()).map(|i| judge_instance(i, &Hit::MISS)))
+    }
+
+    fn geometry_of(&self, instance: usize) -> &BottomLevel {
+        &self.geometries[self.placed[instance].instance.geometry]
+    }
+}
+
+/// The worst of `verdicts`: a serious one, else the first disagreement, else agreement.
+#[cfg(any(feature = "exact", test))]
+fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact::Verdict {
+    let mut worst = crate::exact::Verdict::BothMiss;
+    for v in verdicts {
+        if v.is_serious() || (!v.agrees() && worst.agrees()) {
+            worst = v;
+        }
+    }
+    worst
 }
 
 #[cfg(test)]

@@ -172,7 +172,7 @@ impl<'a> Geometry<'a> {
 
     /// The world-space triangles, checked: every index in range, every used
     /// position finite before and after the transform.
-    fn world_triangles(&self, out: &mut Vec<[Vec3; 3]>) -> Result<()> {
+    pub(crate) fn world_triangles(&self, out: &mut Vec<[Vec3; 3]>) -> Result<()> {
         let (id, count) = (self.id, self.index_count());
         if count % 3 != 0 {
             let what = if matches!(self.indices, Indices::None) { "vertices (no indices)" } else { "indices" };
