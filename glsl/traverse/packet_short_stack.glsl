@@ -12,8 +12,8 @@
 // behind the earliest entry it had to leave (t_gap), or over all of it when the
 // lane lay in a split plane (whose other side it may have skipped). A lane that
 // finishes earlier does the same when it left an entry starting before its hit.
-// No CPU twin of its own: packets must give the single-ray twins' hits
-// (tests/packets.rs).
+// CPU twin: src/kdtree/traverse/packet.rs (the same hits and per-lane counters,
+// tests/packets.rs); packets must also give the single-ray twins' hits.
 #ifndef TRAVERSE_PACKET_SHORT_STACK_GLSL
 #define TRAVERSE_PACKET_SHORT_STACK_GLSL
 

@@ -4,8 +4,8 @@
 // lanes see as front to back; a lane whose own order differs still gets every
 // part of its segment, and the closest hit wins because a popped entry is
 // visited only by lanes whose interval starts before their best hit.
-// No CPU twin of its own: packets must give the single-ray twins' hits
-// (tests/packets.rs).
+// CPU twin: src/kdtree/traverse/packet.rs (the same hits and per-lane counters,
+// tests/packets.rs); packets must also give the single-ray twins' hits.
 #ifndef TRAVERSE_PACKET_STACK_GLSL
 #define TRAVERSE_PACKET_STACK_GLSL
 

@@ -51,7 +51,11 @@ pub struct TraceBinding {
 
 /// The memory dependency of one of kdtrace's barriers on `range` alone: its
 /// `src` accesses before, `dst` accesses after (no queue family transfer).
-fn buffer_barrier(range: BufferRange, src: vk::AccessFlags, dst: vk::AccessFlags) -> vk::BufferMemoryBarrier<'static> {
+pub(super) fn buffer_barrier(
+    range: BufferRange,
+    src: vk::AccessFlags,
+    dst: vk::AccessFlags,
+) -> vk::BufferMemoryBarrier<'static> {
     vk::BufferMemoryBarrier::default()
         .src_access_mask(src)
         .dst_access_mask(dst)

@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use crate::error::{Error, Result};
 use crate::geom::Aabb;
-use crate::gpu::{Buffer, GpuContext};
+use crate::gpu::{Buffer, BufferRange, GpuContext};
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::{KdNode, KdTree};
 use crate::ray_query::RayQueryScene;
@@ -76,19 +76,9 @@ impl SceneBuffers {
         }
         let mut barriers = vec![&scene.nodes, &scene.prim_indices, &scene.triangles];
         barriers.extend(scene.links.iter().flatten());
-        let barriers: Vec<vk::BufferMemoryBarrier> = barriers
-            .into_iter()
-            .map(|b| {
-                vk::BufferMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::SHADER_READ)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(b.buffer)
-                    .offset(0)
-                    .size(vk::WHOLE_SIZE)
-            })
-            .collect();
+        let (write, read) = (vk::AccessFlags::TRANSFER_WRITE, vk::AccessFlags::SHADER_READ);
+        let barriers: Vec<vk::BufferMemoryBarrier> =
+            barriers.into_iter().map(|b| super::binding::buffer_barrier(BufferRange::whole(b), write, read)).collect();
         // SAFETY: `cmd` is recording (the caller's contract); the buffers are alive.
         unsafe {
             ctx.device.cmd_pipeline_barrier(

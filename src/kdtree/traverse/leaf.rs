@@ -30,6 +30,24 @@ impl Closest {
     }
 }
 
+impl Closest {
+    /// The farthest `t` at which the closest hit's exact `t` may lie (`best_reach`
+    /// in leaf.glsl): cells beyond it cannot hold a closer hit.
+    pub(super) fn reach(&self) -> f32 {
+        self.hit.t + self.err
+    }
+
+    /// `leaf_done` in leaf.glsl: an any-hit found one, or the closest hit lies
+    /// inside the leaf's segment, which ends at `t1`.
+    pub(super) fn done(&self, any_hit: bool, t1: f32) -> bool {
+        if any_hit {
+            self.hit.prim_id != PRIM_MISS
+        } else {
+            self.reach() <= t1
+        }
+    }
+}
+
 /// No reference (`NO_REF` in leaf.glsl).
 pub(super) const NO_REF: u32 = u32::MAX;
 
@@ -37,7 +55,7 @@ impl State<'_, '_> {
     /// The farthest `t` at which the closest hit's exact `t` may lie (`best_reach`
     /// in leaf.glsl): cells beyond it cannot hold a closer hit.
     pub(super) fn reach(&self) -> f32 {
-        self.best.hit.t + self.best.err
+        self.best.reach()
     }
 
     /// Tests a leaf (`visit_leaf` in leaf.glsl); true when traversal is done
@@ -50,11 +68,7 @@ impl State<'_, '_> {
         if let Some(log) = self.log.as_mut() {
             log.tested(self.c.triangles - tested);
         }
-        if self.r.any_hit {
-            self.best.hit.prim_id != PRIM_MISS
-        } else {
-            self.reach() <= t1
-        }
+        self.best.done(self.r.any_hit, t1)
     }
 }
 

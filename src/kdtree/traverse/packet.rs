@@ -76,7 +76,7 @@ fn lane_wants(alive: bool, t0: f32, t1: f32, best: &Closest, any_hit: bool) -> b
     if any_hit {
         return best.hit.prim_id == PRIM_MISS;
     }
-    let reach = best.hit.t + best.err;
+    let reach = best.reach();
     t0 < reach || (best.hit.prim_id == PRIM_MISS && t0 <= reach)
 }
 
@@ -170,15 +170,6 @@ fn test_leaf(scene: &SceneRef, lanes: &mut [Lane], on: &[bool], n: crate::kdtree
                 log.packet_round(t);
             }
         }
-    }
-}
-
-/// `leaf_done` in leaf.glsl: an any-hit found one, or the closest hit lies in the segment ending at `t1`.
-fn leaf_done(l: &Lane, t1: f32) -> bool {
-    if l.r.any_hit {
-        l.best.hit.prim_id != PRIM_MISS
-    } else {
-        l.best.hit.t + l.best.err <= t1
     }
 }
 
@@ -300,7 +291,7 @@ pub(super) fn trace_packet_short_stack(
         let done: Vec<bool> = {
             let before: Vec<u32> = lanes.iter().map(|l| l.c.leaves).collect();
             test_leaf(scene, lanes, &on, n);
-            lanes.iter().zip(&before).map(|(l, &b)| l.c.leaves > b && leaf_done(l, l.t1)).collect()
+            lanes.iter().zip(&before).map(|(l, &b)| l.c.leaves > b && l.best.done(l.r.any_hit, l.t1)).collect()
         };
         for (i, (lane, l)) in lanes.iter_mut().zip(st.iter_mut()).enumerate() {
             if !on[i] {
@@ -318,8 +309,7 @@ pub(super) fn trace_packet_short_stack(
                             l.t_gap = glsl_min(l.t_gap, lost_t0);
                         }
                     }
-                    let reach = lane.best.hit.t + lane.best.err;
-                    if !(lane.r.any_hit && done[i]) && (l.in_plane || l.t_gap < reach) {
+                    if !(lane.r.any_hit && done[i]) && (l.in_plane || l.t_gap < lane.best.reach()) {
                         l.fallback = true;
                         l.t_from = if l.in_plane { -f32::MAX } else { l.t_gap };
                     }
@@ -374,7 +364,7 @@ pub(super) fn trace_packet_short_stack(
                 l.t0_restart = lane.t0;
             }
             l.t_done = lane.t0;
-            lane.t1 = glsl_min(t1_scene[i], lane.best.hit.t + lane.best.err);
+            lane.t1 = glsl_min(t1_scene[i], lane.best.reach());
             if lane.alive {
                 l.exit_plane = ExitPlane::Any;
                 lane.c.restarts += 1;
