@@ -110,6 +110,8 @@ fn main() -> Result<()> {
     ));
 
     let mut errors = Vec::new();
+    // Every module's constant and display name, for `shaders::ALL`.
+    let mut all: Vec<(String, String)> = Vec::new();
     for path in &kernels {
         match compile(&compiler, path, &include_dirs, &kernel_defines) {
             Ok(words) => {
@@ -119,11 +121,12 @@ fn main() -> Result<()> {
                 let name = if ext == "comp" { stem.clone() } else { format!("{stem}_{ext}") };
                 let spv = out_dir.join(format!("{name}.spv"));
                 fs::write(&spv, bytemuck_bytes(&words))?;
+                let constant = name.to_uppercase().replace('-', "_");
                 rs.push_str(&format!(
-                    "/// SPIR-V of `glsl/{stem}.{ext}`.\npub const {}: &[u8] = include_bytes!({:?});\n",
-                    name.to_uppercase().replace('-', "_"),
+                    "/// SPIR-V of `glsl/{stem}.{ext}`.\npub const {constant}: &[u8] = include_bytes!({:?});\n",
                     spv.display().to_string()
                 ));
+                all.push((constant, if ext == "comp" { stem } else { format!("{stem}.{ext}") }));
             }
             Err(e) => errors.push(e.to_string()),
         }
@@ -147,12 +150,13 @@ fn main() -> Result<()> {
                 let stem = path.file_stem().unwrap().to_string_lossy().to_string();
                 let spv = out_dir.join(format!("example_{stem}.spv"));
                 fs::write(&spv, bytemuck_bytes(&words))?;
+                let constant = format!("EXAMPLE_{}", stem.to_uppercase().replace('-', "_"));
                 rs.push_str(&format!(
                     "/// SPIR-V of `glsl/examples/{stem}.comp`, a shader of `examples/embed.rs` (example and tests only).\n\
-                     pub const EXAMPLE_{}: &[u8] = include_bytes!({:?});\n",
-                    stem.to_uppercase().replace('-', "_"),
+                     pub const {constant}: &[u8] = include_bytes!({:?});\n",
                     spv.display().to_string()
                 ));
+                all.push((constant, format!("example_{stem}")));
             }
             Err(e) => errors.push(e.to_string()),
         }
@@ -164,6 +168,11 @@ fn main() -> Result<()> {
         }
         bail!("shader compilation failed:\n{}", errors.join("\n"));
     }
+    rs.push_str("/// Every module above with its name (kernels by stem, graphics stages as `stem.ext`).\npub const ALL: &[(&str, &[u8])] = &[\n");
+    for (constant, name) in &all {
+        rs.push_str(&format!("    ({name:?}, {constant}),\n"));
+    }
+    rs.push_str("];\n");
     fs::write(out_dir.join("shaders.rs"), rs)?;
     Ok(())
 }
@@ -220,11 +229,13 @@ void put(vec4 x) { put(floatBitsToUint(x)); }
 /// The library's struct headers in `dir`: `ray.glsl`, `raster.glsl`,
 /// `render_structs.glsl`, and `layout_probe.glsl` with every struct's `put`.
 fn write_struct_headers(dir: &Path) -> Result<()> {
-    use abi::{Hit, RasterView, Ray, TraceParams};
+    use abi::{GpuGeometry, GpuInstance, GpuInstanceHit, Hit, RasterView, Ray, TopNode, TraceParams, TwoLevelParams};
     use render_structs::{Emitter, GpuLight, GpuMaterial, GpuPath, RenderParams, Surface};
     let source = "src/abi.rs";
     write_generated(dir, "ray.glsl", source, &guarded("RAY_GLSL", &[Ray::GLSL, Hit::GLSL, TraceParams::GLSL]))?;
     write_generated(dir, "raster.glsl", source, &guarded("RASTER_GLSL", &[RasterView::GLSL]))?;
+    let twolevel = [TwoLevelParams::GLSL, GpuGeometry::GLSL, GpuInstance::GLSL, TopNode::GLSL, GpuInstanceHit::GLSL];
+    write_generated(dir, "twolevel.glsl", source, &guarded("TWOLEVEL_GLSL", &twolevel))?;
     let render = [GpuPath::GLSL, Surface::GLSL, GpuMaterial::GLSL, Emitter::GLSL, GpuLight::GLSL, RenderParams::GLSL];
     write_generated(dir, "render_structs.glsl", "src/render/structs.rs", &guarded("RENDER_STRUCTS_GLSL", &render))?;
     let puts = [
@@ -233,6 +244,11 @@ fn write_struct_headers(dir: &Path) -> Result<()> {
         Hit::PUT,
         TraceParams::PUT,
         RasterView::PUT,
+        TwoLevelParams::PUT,
+        GpuGeometry::PUT,
+        GpuInstance::PUT,
+        TopNode::PUT,
+        GpuInstanceHit::PUT,
         GpuPath::PUT,
         Surface::PUT,
         GpuMaterial::PUT,
@@ -241,7 +257,7 @@ fn write_struct_headers(dir: &Path) -> Result<()> {
         RenderParams::PUT,
     ];
     let probe = format!(
-        "#include \"ray.glsl\"\n#include \"raster.glsl\"\n#include \"render_structs.glsl\"\n\n{}",
+        "#include \"ray.glsl\"\n#include \"raster.glsl\"\n#include \"twolevel.glsl\"\n#include \"render_structs.glsl\"\n\n{}",
         puts.join("\n")
     );
     write_generated(

@@ -84,3 +84,105 @@ gpu_struct! {
         pub params: [f32; 4],
     }
 }
+
+// The two-level kernel's records (glsl/trace_twolevel.comp, `kdtrace::twolevel`),
+// in the generated header `twolevel.glsl`.
+
+gpu_struct! {
+    /// Push constants of `trace_twolevel.comp` (16 bytes).
+    #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+    pub struct TwoLevelParams {
+        /// Rays in this dispatch.
+        pub ray_count: u32,
+        /// The rays' 8-bit visibility mask: instance `i` is visible when `mask & instance.mask != 0`.
+        pub mask: u32,
+        /// Nodes of the top level (0: no instance, every ray misses).
+        pub top_nodes: u32,
+        /// Padding (0).
+        pub pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// A geometry of a two-level scene on the device (48 bytes): its kd-tree's
+    /// box and where its nodes and triangle references start in the shared buffers.
+    #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+    pub struct GpuGeometry {
+        /// xyz: the tree's box minimum (object space).
+        pub bounds_min: [f32; 4],
+        /// xyz: the tree's box maximum.
+        pub bounds_max: [f32; 4],
+        /// Its first node in the node texels.
+        pub node_base: u32,
+        /// Its first triangle reference (3 texels each) in the triangle texels.
+        pub texel_base: u32,
+        /// The caller's geometry id.
+        pub id: u32,
+        /// Padding (0).
+        pub pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// An instance of a two-level scene on the device (64 bytes).
+    #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+    pub struct GpuInstance {
+        /// First row of the world-to-object 3×4 matrix.
+        pub row0: [f32; 4],
+        /// Second row.
+        pub row1: [f32; 4],
+        /// Third row.
+        pub row2: [f32; 4],
+        /// Index of its geometry.
+        pub geometry: u32,
+        /// The caller's instance id.
+        pub instance_id: u32,
+        /// Its 8-bit visibility mask.
+        pub mask: u32,
+        /// Padding (0).
+        pub pad: u32,
+    }
+}
+
+gpu_struct! {
+    /// A node of the top-level BVH over the instances (48 bytes).
+    #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+    pub struct TopNode {
+        /// xyz: the box minimum (world space); w: the largest condition number of
+        /// the instances below (the box widens by it times the origin's magnitude).
+        pub bounds_min: [f32; 4],
+        /// xyz: the box maximum.
+        pub bounds_max: [f32; 4],
+        /// Leaf: first entry of the instance order; interior: the second child (the first follows).
+        pub index: u32,
+        /// Instances in the leaf; 0 for an interior node.
+        pub count: u32,
+        /// Padding (0).
+        pub pad0: u32,
+        /// Padding (0).
+        pub pad1: u32,
+    }
+}
+
+gpu_struct! {
+    /// A hit of the two-level kernel (32 bytes); `InstanceHit` on the host.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+    pub struct GpuInstanceHit {
+        /// The world ray's parameter; +inf for a miss, NaN for an invalid or incomplete ray.
+        pub t: f32,
+        /// The triangle's index in its geometry, or a special `PRIM_*` value.
+        pub prim_index: u32,
+        /// Barycentric weight of `v1`.
+        pub u: f32,
+        /// Barycentric weight of `v2`.
+        pub v: f32,
+        /// The caller's instance id (`0xffffffff` for none).
+        pub instance_id: u32,
+        /// The caller's geometry id (`0xffffffff` for none).
+        pub geometry_id: u32,
+        /// 1 when the triangle faces the ray.
+        pub front_face: u32,
+        /// Index of the instance in the scene's list (`0xffffffff` for none).
+        pub instance_index: u32,
+    }
+}

@@ -112,6 +112,28 @@ pub const BINDING_ORDER: u32 = 10;
 /// Number of bindings of the trace kernel.
 pub const TRACE_BINDINGS: u32 = 11;
 
+// Descriptor bindings of the two-level kernel (glsl/trace_twolevel.comp, set 0).
+/// Binding of every geometry's kd-tree nodes, one after another (texels as `BINDING_NODES`).
+pub const TL_BINDING_NODES: u32 = 0;
+/// Binding of every geometry's triangle references (texels as `BINDING_TRIANGLES`).
+pub const TL_BINDING_TRIANGLES: u32 = 1;
+/// Binding of the input rays (32-byte `Ray`s, world space).
+pub const TL_BINDING_RAYS: u32 = 2;
+/// Binding of the output hits (32-byte `GpuInstanceHit`s).
+pub const TL_BINDING_HITS: u32 = 3;
+/// Binding of the geometries (`GpuGeometry`).
+pub const TL_BINDING_GEOMETRIES: u32 = 4;
+/// Binding of the instances (`GpuInstance`).
+pub const TL_BINDING_INSTANCES: u32 = 5;
+/// Binding of the top-level BVH (`TopNode`, the root first).
+pub const TL_BINDING_TOP: u32 = 6;
+/// Binding of the instance order of the top-level leaves (`u32`).
+pub const TL_BINDING_ORDER: u32 = 7;
+/// Number of bindings of the two-level kernel.
+pub const TL_BINDINGS: u32 = 8;
+/// Entries of the two-level kernel's top-level stack: the BVH's depth must stay below it.
+pub const MAX_TOP_STACK: u32 = 64;
+
 // The coherent order of a batch (`glsl/order_rays.comp`, `RayOrder::Coherent`).
 /// Bits per axis of the origin's cell in the scene box (a Morton code of 3 × this).
 pub const ORDER_CELL_BITS: u32 = 4;
@@ -242,6 +264,15 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
     ("BINDING_ROPES", BINDING_ROPES),
     ("BINDING_ORDER", BINDING_ORDER),
+    ("TL_BINDING_NODES", TL_BINDING_NODES),
+    ("TL_BINDING_TRIANGLES", TL_BINDING_TRIANGLES),
+    ("TL_BINDING_RAYS", TL_BINDING_RAYS),
+    ("TL_BINDING_HITS", TL_BINDING_HITS),
+    ("TL_BINDING_GEOMETRIES", TL_BINDING_GEOMETRIES),
+    ("TL_BINDING_INSTANCES", TL_BINDING_INSTANCES),
+    ("TL_BINDING_TOP", TL_BINDING_TOP),
+    ("TL_BINDING_ORDER", TL_BINDING_ORDER),
+    ("MAX_TOP_STACK", MAX_TOP_STACK),
     ("ORDER_CELL_BITS", ORDER_CELL_BITS),
     ("ORDER_WORKGROUP_SIZE", ORDER_WORKGROUP_SIZE),
     ("ORDER_BUCKETS", ORDER_BUCKETS),

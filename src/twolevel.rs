@@ -5,15 +5,19 @@
 //! transform and box. Moving instances rebuilds the top level only
 //! ([`TwoLevelScene::set_instances`]).
 //!
-//! **The CPU model and twin only, so far (issue 29, items 2–3):** the GPU
-//! kernels still trace one flattened tree (`Scene::from_geometries`). This
-//! module fixes the contract the GPU two-level kernels are to meet bit for bit:
+//! [`TwoLevelScene::trace`] is the CPU model and twin; [`TwoLevelTracer`]
+//! traces the same scene on a device (glsl/trace_twolevel.comp) with the same
+//! answers bit for bit, for the single-ray variants `stack`, `restart`,
+//! `push-down` and the short stacks, robust or plain, closest or any hit
+//! (`backtrack`, `ropes` and packets trace two-level on the CPU only). The
+//! contract both meet:
 //!
 //! - **The object-space ray** of instance `i` is [`TwoLevelScene::object_ray`]:
 //!   origin `W·(o, 1)` and direction `W·(d, 0)`, with `W` the world-to-object
 //!   transform (the inverse of the instance's transform, computed in f64 and
 //!   rounded to f32 once), each component summed left to right in f32 without
-//!   fused multiply-adds; `tmin`, `tmax` unchanged (the direction is not
+//!   fused multiply-adds (the origin's translation added last, the direction's
+//!   three products only); `tmin`, `tmax` unchanged (the direction is not
 //!   normalized, so `t` is the world ray's parameter).
 //! - **Each instance's answer is the robust traversal's for its object ray**:
 //!   exact for that ray (the guarantees of docs/ACCURACY.md, on the geometry's
@@ -26,13 +30,16 @@
 //! - **Front face** is decided in object space, as in Vulkan: the triangle is
 //!   front-facing when `dot((v1 - v0) × (v2 - v0), d_object) < 0` (its vertices
 //!   appear clockwise from the origin in a left-handed frame), so a mirroring
-//!   transform does not flip it.
+//!   transform does not flip it. The cross product is rounded to f32 as
+//!   written; the dot product's sign is exact (error-free products and an
+//!   exact sum), with `d_object` as traced (denormal components as zeros).
 //! - **Masks**: an instance is visible to a ray when `ray_mask & instance.mask != 0`.
 
 use glam::{Affine3A, DAffine3, DVec3, Vec3};
 
 use crate::consts::PRIM_MISS;
 use crate::error::{Error, Result};
+use crate::ff::{exact_sum8, two_prod};
 use crate::geom::{Aabb, Ray};
 use crate::kdtree::links::TreeLinks;
 use crate::kdtree::traverse::{trace_ray, SceneRef, Traversal};
@@ -262,9 +269,9 @@ impl TwoLevelScene {
         let m = &self.placed[index].to_object;
         let o = Vec3::from(ray.origin);
         let d = Vec3::from(ray.dir);
-        let row = |r: usize, v: Vec3, w: f32| ((m[r][0] * v.x + m[r][1] * v.y) + m[r][2] * v.z) + m[r][3] * w;
-        let origin = Vec3::new(row(0, o, 1.0), row(1, o, 1.0), row(2, o, 1.0));
-        let dir = Vec3::new(row(0, d, 0.0), row(1, d, 0.0), row(2, d, 0.0));
+        let linear = |r: usize, v: Vec3| (m[r][0] * v.x + m[r][1] * v.y) + m[r][2] * v.z;
+        let origin = Vec3::new(linear(0, o) + m[0][3], linear(1, o) + m[1][3], linear(2, o) + m[2][3]);
+        let dir = Vec3::new(linear(0, d), linear(1, d), linear(2, d));
         Ray::new(origin, dir, ray.tmin, ray.tmax)
     }
 
@@ -277,7 +284,7 @@ impl TwoLevelScene {
         let mut best = InstanceHit::MISS;
         if self.nodes.is_empty() || !ray.is_valid() || mask == 0 {
             if !ray.is_valid() {
-                best.prim_index = crate::consts::PRIM_INVALID;
+                best = InstanceHit { t: f32::NAN, prim_index: crate::consts::PRIM_INVALID, ..InstanceHit::MISS };
             }
             return best;
         }
@@ -325,9 +332,7 @@ impl TwoLevelScene {
                     continue;
                 }
                 if hit.t <= best.t || !best.is_hit() {
-                    let [v0, v1, v2] = geometry.triangles[hit.prim_id as usize];
-                    let n = (v1 - v0).cross(v2 - v0);
-                    let od = Vec3::from(object.dir);
+                    let triangle = &geometry.triangles[hit.prim_id as usize];
                     best = InstanceHit {
                         t: hit.t,
                         instance_id: placed.instance.instance_id,
@@ -335,7 +340,7 @@ impl TwoLevelScene {
                         prim_index: hit.prim_id,
                         u: hit.u,
                         v: hit.v,
-                        front_face: n.as_dvec3().dot(od.as_dvec3()) < 0.0,
+                        front_face: faces(triangle, object.traced_dir()),
                         instance_index: i,
                     };
                     if traversal.any_hit {
@@ -351,6 +356,18 @@ impl TwoLevelScene {
         }
         best
     }
+}
+
+/// Whether `triangle` faces the direction `d`: the exact sign of
+/// `dot(n, d) < 0`, `n` the f32 cross product of its edges `v1 - v0` and
+/// `v2 - v0` (products as written, no fused multiply-add). Twin of
+/// `front_facing` in glsl/trace_twolevel.comp.
+fn faces(triangle: &[Vec3; 3], d: Vec3) -> bool {
+    let [v0, v1, v2] = *triangle;
+    let (e1, e2) = (v1 - v0, v2 - v0);
+    let n = [e1.y * e2.z - e2.y * e1.z, e1.z * e2.x - e2.z * e1.x, e1.x * e2.y - e2.x * e1.y];
+    let [px, py, pz] = [two_prod(n[0], d.x), two_prod(n[1], d.y), two_prod(n[2], d.z)];
+    exact_sum8([px.hi, px.lo, py.hi, py.lo, pz.hi, pz.lo, 0.0, 0.0]).hi < 0.0
 }
 
 /// The world ray's entry and exit of `b` widened by `widen` on every side,
@@ -486,6 +503,9 @@ fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact:
     }
     worst
 }
+
+mod gpu;
+pub use gpu::TwoLevelTracer;
 
 #[cfg(test)]
 mod tests;

@@ -20,23 +20,8 @@ use kdtrace::trace::{TraceOptions, Tracer};
 use kdtrace::traversal::Traversal;
 
 /// Every SPIR-V module kdtrace builds (glsl/*.comp, the raster stages and the
-/// example shaders that engines copy).
-const MODULES: [(&str, &[u8]); 14] = [
-    ("layout_probe", shaders::LAYOUT_PROBE),
-    ("order_rays", shaders::ORDER_RAYS),
-    ("raster_visibility.frag", shaders::RASTER_VISIBILITY_FRAG),
-    ("raster_visibility.vert", shaders::RASTER_VISIBILITY_VERT),
-    ("render_layout_probe", shaders::RENDER_LAYOUT_PROBE),
-    ("render_raygen", shaders::RENDER_RAYGEN),
-    ("render_resolve", shaders::RENDER_RESOLVE),
-    ("render_shade", shaders::RENDER_SHADE),
-    ("render_visibility", shaders::RENDER_VISIBILITY),
-    ("trace", shaders::TRACE),
-    ("trace_ray_query", shaders::TRACE_RAY_QUERY),
-    ("example_layout_probe", shaders::EXAMPLE_LAYOUT_PROBE),
-    ("example_raygen", shaders::EXAMPLE_RAYGEN),
-    ("example_shade", shaders::EXAMPLE_SHADE),
-];
+/// example shaders that engines copy), as build.rs lists them.
+const MODULES: &[(&str, &[u8])] = shaders::ALL;
 
 /// The operands of every `OpCapability` of a SPIR-V module.
 fn capabilities(spirv: &[u8]) -> Vec<u32> {
@@ -61,6 +46,9 @@ fn capabilities(spirv: &[u8]) -> Vec<u32> {
 fn no_module_declares_a_64_bit_capability() {
     // Float64 = 10, Int64 = 11, Int64Atomics = 12, Int64ImageEXT = 5016.
     let forbidden = [(10, "Float64"), (11, "Int64"), (12, "Int64Atomics"), (5016, "Int64ImageEXT")];
+    for kernel in ["trace", "trace_twolevel", "render_shade", "divergence_replay", "example_shade"] {
+        assert!(MODULES.iter().any(|(n, _)| *n == kernel), "{kernel} is not in shaders::ALL");
+    }
     for (name, spirv) in MODULES {
         let caps = capabilities(spirv);
         // Shader = 1: the parser read the module's capabilities at all.

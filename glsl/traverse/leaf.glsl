@@ -17,8 +17,14 @@
 
 // Loads the triangle of the leaf reference `index` (stored in prim_indices
 // order, the prim id inline).
+// A two-level kernel (GEOMETRY_BASES) reads the current geometry's references
+// from `texel_base` on (in references; see load_node).
 uint load_triangle(uint index, out vec3 v0, out vec3 v1, out vec3 v2) {
+#ifdef GEOMETRY_BASES
+    int base = int(texel_base + index) * 3;
+#else
     int base = int(index) * 3;
+#endif
     uvec4 a = imageLoad(tri_texels, base);
     v0 = uintBitsToFloat(a.xyz);
     v1 = uintBitsToFloat(imageLoad(tri_texels, base + 1).xyz);

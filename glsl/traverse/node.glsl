@@ -18,9 +18,14 @@ struct TraceCounters {
     uint drops;
 };
 
-// Loads a node.
+// Loads a node. A two-level kernel (GEOMETRY_BASES) keeps every geometry's
+// nodes in one buffer and reads the current geometry's from `node_base` on.
 uvec2 load_node(uint node) {
+#ifdef GEOMETRY_BASES
+    return imageLoad(node_texels, int(node_base + node)).xy;
+#else
     return imageLoad(node_texels, int(node)).xy;
+#endif
 }
 
 // Fetches a node, counting the visit and the loop step.

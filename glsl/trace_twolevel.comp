@@ -1,0 +1,239 @@
+#version 450
+// The two-level kernel: one world ray per invocation through a top-level BVH
+// over instance boxes, then, in each instance it enters, the geometry's own
+// kd-tree in object space with a single-ray variant of trace.comp (`stack`,
+// `restart`, `push-down` and the short stacks; robust or plain; closest or any
+// hit). CPU twin, bit for bit: `TwoLevelScene::trace` in src/twolevel.rs, whose
+// module docs give the contract (the object ray, ties, front face, masks).
+//
+// Every geometry's nodes and triangle references share one texel buffer each;
+// `node_base` and `texel_base` (GEOMETRY_BASES in node.glsl and leaf.glsl) say
+// where the instance being traced starts. Robust instances trace carefully in
+// one pass (PASS_ONE): no fast pass lists rays here.
+
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
+
+#define GEOMETRY_BASES
+
+#include "ray.glsl"
+#include "twolevel.glsl"
+#include "ray_checks.glsl"
+#include "kdnode.glsl"
+
+layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
+
+// The trace kernel's specialization constants, same ids (src/twolevel/gpu.rs sets them).
+layout(constant_id = TRACE_SPEC_VARIANT) const uint VARIANT = VARIANT_STACK;
+layout(constant_id = TRACE_SPEC_COUNTERS) const bool COUNTERS = false;         // unused here
+layout(constant_id = TRACE_SPEC_STACK_SIZE) const uint STACK_SIZE = 3u;
+layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;
+layout(constant_id = TRACE_SPEC_PACKET_WIDTH) const uint PACKET_WIDTH = 1u;   // single rays only
+layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;
+layout(constant_id = TRACE_SPEC_PASS) const uint PASS = PASS_ONE;
+
+const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
+
+#include "triangle.glsl"
+
+layout(set = 0, binding = TL_BINDING_NODES, rg32ui) uniform readonly uimageBuffer node_texels;
+layout(set = 0, binding = TL_BINDING_TRIANGLES, rgba32ui) uniform readonly uimageBuffer tri_texels;
+layout(std430, set = 0, binding = TL_BINDING_RAYS) readonly buffer Rays { uvec4 ray_words[]; };
+layout(std430, set = 0, binding = TL_BINDING_HITS) writeonly buffer Hits { GpuInstanceHit hits[]; };
+layout(std430, set = 0, binding = TL_BINDING_GEOMETRIES) readonly buffer Geometries { GpuGeometry geometries[]; };
+layout(std430, set = 0, binding = TL_BINDING_INSTANCES) readonly buffer Instances { GpuInstance instances[]; };
+layout(std430, set = 0, binding = TL_BINDING_TOP) readonly buffer Top { TopNode top_nodes[]; };
+layout(std430, set = 0, binding = TL_BINDING_ORDER) readonly buffer Order { uint top_order[]; };
+
+layout(push_constant) uniform Push { TwoLevelParams params; };
+
+const float FLT_MIN_NORMAL = 1.17549435e-38;
+const float FLT_MAX = 3.40282347e38;
+
+// Where the geometry of the instance being traced starts in the shared buffers.
+uint node_base = 0u;
+uint texel_base = 0u;
+
+#include "stack.glsl"
+#include "restart.glsl"
+#include "push_down.glsl"
+#include "short_stack.glsl"
+#include "ray_setup.glsl"
+
+// The entry of the world ray into the box [lo - widen, hi + widen] within
+// [tmin, tmax], conservatively (the far bound times 1 + 3 * 2^-23). CPU twin:
+// `slab` in src/twolevel.rs.
+bool enters_box(vec3 lo, vec3 hi, float widen, vec3 o, vec3 d, vec3 inv, float tmin, float tmax, out float entry) {
+    float t0 = tmin;
+    float t1 = tmax;
+    [[unroll]] for (uint a = 0u; a < 3u; ++a) {
+        precise float l = lo[a] - widen;
+        precise float h = hi[a] + widen;
+        if (d[a] == 0.0) {
+            if (o[a] < l || o[a] > h) return false;
+            continue;
+        }
+        precise float ta = (l - o[a]) * inv[a];
+        precise float tb = (h - o[a]) * inv[a];
+        t0 = max(t0, min(ta, tb));
+        precise float far_bound = max(ta, tb) * uintBitsToFloat(0x3f800003u);  // 1 + 3 * 2^-23
+        t1 = min(t1, far_bound);
+    }
+    entry = t0;
+    return t0 <= t1;
+}
+
+// The object ray of `inst` (CPU twin: `TwoLevelScene::object_ray`): each
+// component summed left to right, no fused multiply-add.
+Ray object_ray(GpuInstance inst, Ray ray) {
+    Ray o = ray;
+    vec4 rows[3] = vec4[3](inst.row0, inst.row1, inst.row2);
+    [[unroll]] for (uint k = 0u; k < 3u; ++k) {
+        vec4 m = rows[k];
+        precise float p = ((m.x * ray.origin.x + m.y * ray.origin.y) + m.z * ray.origin.z) + m.w;
+        precise float q = (m.x * ray.dir.x + m.y * ray.dir.y) + m.z * ray.dir.z;
+        o.origin[k] = p;
+        o.dir[k] = q;
+    }
+    return o;
+}
+
+// Whether triangle `reference` of the current geometry faces the object ray
+// direction `d`: the exact sign of dot(n, d) < 0, n the f32 cross product of
+// its edges (CPU twin: `faces` in src/twolevel.rs).
+bool front_facing(uint reference, vec3 d) {
+    vec3 v0, v1, v2;
+    load_triangle(reference, v0, v1, v2);
+    precise vec3 e1 = v1 - v0;
+    precise vec3 e2 = v2 - v0;
+    precise float nx = e1.y * e2.z - e2.y * e1.z;
+    precise float ny = e1.z * e2.x - e2.z * e1.x;
+    precise float nz = e1.x * e2.y - e2.x * e1.y;
+    vec2 px = ff_two_prod(nx, d.x);
+    vec2 py = ff_two_prod(ny, d.y);
+    vec2 pz = ff_two_prod(nz, d.z);
+    return ff_exact_sum8(float[8](px.x, px.y, py.x, py.y, pz.x, pz.y, 0.0, 0.0)).x < 0.0;
+}
+
+// Traces the object ray of one instance through its geometry (trace.comp's
+// trace_ray, one careful pass). `reference`: the hit's triangle reference.
+Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
+    node_base = g.node_base;
+    texel_base = g.texel_base;
+    Closest best = closest_none(ray.tmax);
+    TraceCounters c = TraceCounters(0u, 0u, 0u, 0u, 0u, 0u);
+    TraceRay r;
+    float t0, t1;
+    bool valid, far;
+    bool alive = setup_ray(ray, g.bounds_min.xyz, g.bounds_max.xyz, r, t0, t1, valid, far, best);
+    bool finished = true;
+    if (alive) {
+        if (VARIANT == VARIANT_RESTART) {
+            finished = trace_restart(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN) {
+            finished = trace_push_down(r, t0, t1, best, c);
+        } else if (VARIANT == VARIANT_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, false, best, c);
+        } else if (VARIANT == VARIANT_PUSH_DOWN_SHORT_STACK) {
+            finished = trace_short_stack(r, t0, t1, true, best, c);
+        } else {
+            finished = trace_stack(r, t0, t1, best, c);
+        }
+    }
+    reference = best.reference;
+    return final_hit(best, r, finished);
+}
+
+void trace_world(uint index) {
+    Ray ray = ray_from_words(ray_words[2u * index], ray_words[2u * index + 1u]);
+    GpuInstanceHit best = GpuInstanceHit(uintBitsToFloat(0x7f800000u), PRIM_MISS, 0.0, 0.0, 0xffffffffu, 0xffffffffu,
+                                         0u, 0xffffffffu);
+    Ray checked = ray;
+    checked.dir = traced_dir(ray.dir);
+    bool valid = ray_is_valid(checked);
+    if (!valid) best.prim_index = PRIM_INVALID;
+    if (!valid || (params.mask & 0xffu) == 0u || params.top_nodes == 0u) {
+        if (!valid) best.t = uintBitsToFloat(0x7fc00000u);
+        hits[index] = best;
+        return;
+    }
+    vec3 o = ray.origin;
+    vec3 d = checked.dir;
+    vec3 inv = clamp(1.0 / d, vec3(-FLT_MAX), vec3(FLT_MAX));
+    // The object rays' rounding grows with the origin's magnitude (see `Placed`
+    // in src/twolevel.rs): boxes widen by it times each subtree's condition number.
+    precise float far_scale = max(abs(o.x), max(abs(o.y), abs(o.z))) * (1.0 / 1048576.0);
+    bool incomplete = false;
+    bool done = false;
+    uint stack[MAX_TOP_STACK];
+    stack[0] = 0u;
+    uint sp = 1u;
+    while (sp > 0u && !done) {
+        // Every pass pops one node, each pushed at most once: the loop ends, and
+        // one the driver ends early leaves entries, caught below.
+        --sp;
+        uint n = stack[sp];
+        TopNode node = top_nodes[n];
+        float reach = min(best.t, ray.tmax);
+        float entry;
+        precise float widen = far_scale * node.bounds_min.w;
+        if (!enters_box(node.bounds_min.xyz, node.bounds_max.xyz, widen, o, d, inv, ray.tmin, reach, entry)) continue;
+        if (node.count == 0u) {
+            uint a = n + 1u;
+            uint b = node.index;
+            TopNode na = top_nodes[a];
+            TopNode nb = top_nodes[b];
+            float ta, tb;
+            precise float wa = far_scale * na.bounds_min.w;
+            precise float wb = far_scale * nb.bounds_min.w;
+            if (!enters_box(na.bounds_min.xyz, na.bounds_max.xyz, wa, o, d, inv, ray.tmin, reach, ta)) {
+                ta = uintBitsToFloat(0x7f800000u);
+            }
+            if (!enters_box(nb.bounds_min.xyz, nb.bounds_max.xyz, wb, o, d, inv, ray.tmin, reach, tb)) {
+                tb = uintBitsToFloat(0x7f800000u);
+            }
+            // The nearer child is popped first.
+            bool a_first = ta <= tb;
+            stack[sp] = a_first ? b : a;
+            stack[sp + 1u] = a_first ? a : b;
+            sp += 2u;
+            continue;
+        }
+        for (uint k = node.index; k < node.index + node.count; ++k) {
+            uint i = top_order[k];
+            GpuInstance inst = instances[i];
+            if ((inst.mask & params.mask) == 0u) continue;
+            GpuGeometry g = geometries[inst.geometry];
+            Ray object = object_ray(inst, ray);
+            object.tmax = min(best.t, ray.tmax);
+            uint reference;
+            Hit hit = trace_instance(object, g, reference);
+            if (hit.prim_id >= PRIM_INCOMPLETE) {
+                // Cut short (or an object ray the transform made invalid).
+                if (hit.prim_id != PRIM_MISS) incomplete = true;
+                continue;
+            }
+            if (hit.t <= best.t || best.prim_index >= PRIM_INCOMPLETE) {
+                best = GpuInstanceHit(hit.t, hit.prim_id, hit.u, hit.v, inst.instance_id, g.id,
+                                      front_facing(reference, traced_dir(object.dir)) ? 1u : 0u, i);
+                if (ANY_HIT) {
+                    done = true;
+                    break;
+                }
+            }
+        }
+    }
+    // A loop the driver ended early leaves entries on the stack: not a miss.
+    if (sp > 0u && !done) incomplete = true;
+    if (incomplete && !done) {
+        best = GpuInstanceHit(uintBitsToFloat(0x7fc00000u), PRIM_INCOMPLETE, 0.0, 0.0, 0xffffffffu, 0xffffffffu, 0u,
+                              0xffffffffu);
+    }
+    hits[index] = best;
+}
+
+void main() {
+    uint id = gl_GlobalInvocationID.x;
+    if (id >= params.ray_count) return;
+    trace_world(id);
+}
