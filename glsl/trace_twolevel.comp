@@ -126,6 +126,7 @@ Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
     float t0, t1;
     bool valid, far;
     bool alive = setup_ray(ray, g.bounds_min.xyz, g.bounds_max.xyz, r, t0, t1, valid, far, best);
+    if (!valid) best.hit.prim_id = PRIM_INVALID;
     bool finished = true;
     if (alive) {
         if (VARIANT == VARIANT_RESTART) {

@@ -1,7 +1,8 @@
-// The per-ray setup and finish shared by the trace kernels (trace.comp and
-// trace_twolevel.comp): a ray clipped to a box (the scene's, or a geometry's in
-// object space), far rays moved next to it, the closed segment, and the hit
-// written back in the ray's own parameter.
+// The per-ray setup and finish of the trace kernels: a ray clipped to a box
+// (the scene's, or a geometry's in object space), far rays moved next to it, the closed segment, and the hit
+// written back in the ray's own parameter. trace_twolevel.comp calls setup_ray
+// and final_hit; trace.comp writes their steps out (fewer instructions there)
+// and shares the far-ray functions.
 //
 // Expects from its includer: the specialization constants ROBUST and PASS,
 // SEGMENT_FRAME, FLT_MIN_NORMAL and FLT_MAX, and what leaf.glsl expects.
@@ -127,8 +128,9 @@ bool is_far(TraceRay r, float t0, vec3 bmin, vec3 bmax) {
 // Sets up the traversal of `ray` through the box [bmin, bmax]: the ray's
 // TraceRay, its segment [t0, t1] in the box and, for a far robust ray in the
 // kernels that trace carefully, the segment frame next to the box (best's bound
-// moves with it). `valid`: the ray passed ray_is_valid; `far`: it starts more
-// than SHIFT_DIAGONALS diagonals before the box. Returns whether it enters the box.
+// moves with it). `valid`: the ray passed ray_is_valid (the caller marks an
+// invalid one); `far`: it starts more than SHIFT_DIAGONALS diagonals before the
+// box. Returns whether it enters the box.
 bool setup_ray(Ray ray, vec3 bmin, vec3 bmax, out TraceRay r, out float t0, out float t1, out bool valid,
                out bool far, inout Closest best) {
     ray.dir = traced_dir(ray.dir);
@@ -161,7 +163,6 @@ bool setup_ray(Ray ray, vec3 bmin, vec3 bmax, out TraceRay r, out float t0, out 
         t1 = next_up(t1);
         best.hit.t = next_up(best.hit.t);
     }
-    if (!valid) best.hit.prim_id = PRIM_INVALID;
     return alive;
 }
 
