@@ -13,7 +13,8 @@
 //! A shader error fails the build with `file:line: message`.
 //!
 //! It also writes the users' GLSL header `$OUT_DIR/include/kdtrace.glsl` (the special
-//! `prim_id`s and counter indices as `#define`s, then `Ray` and `Hit`),
+//! `prim_id`s and counter indices as `#define`s, then `Ray`, `Hit` and the
+//! two-level kernel's `GpuInstanceHit`),
 //! embedded as `shaders::HEADER` and handed to the build scripts of dependents
 //! as `DEP_KDTRACE_INCLUDE` (`links = "kdtrace"`), and compiles the example shaders
 //! `glsl/examples/*.comp` against that header alone (no other defines or include
@@ -192,6 +193,7 @@ fn user_header() -> String {
     }
     h.push('\n');
     h.push_str(&guarded("RAY_GLSL", &[abi::Ray::GLSL, abi::Hit::GLSL]));
+    h.push_str(&guarded("INSTANCE_HIT_GLSL", &[abi::GpuInstanceHit::GLSL]));
     h.push_str("\n#endif // KDTRACE_GLSL\n");
     h
 }

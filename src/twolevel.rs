@@ -505,7 +505,8 @@ fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact:
 }
 
 mod gpu;
-pub use gpu::TwoLevelTracer;
+pub use crate::abi::GpuInstanceHit;
+pub use gpu::{TwoLevelBinding, TwoLevelTracer};
 
 #[cfg(test)]
 mod tests;

@@ -220,3 +220,86 @@ fn gpu_two_level_equals_its_cpu_twin() {
     }
     common::assert_validation_clean(&ctx);
 }
+
+/// An engine's frame: its own ray and hit buffers, the two-level trace recorded
+/// into its command buffer (no submit of kdtrace's), hits equal to `trace`'s;
+/// moving instances in place keeps the binding; more instances than the buffers
+/// hold reallocate them and the old binding is refused. Validation clean.
+#[test]
+fn two_level_traces_record_into_an_engine_frame() {
+    use kdtrace::ash::vk;
+    use kdtrace::gpu::{Buffer, BufferRange};
+    use kdtrace::gpu_allocator::MemoryLocation;
+    let ctx = common::context();
+    let config = BuildConfig::default();
+    let geometries = vec![BottomLevel::new(3, common::sphere(2, 0.2, 4), &config)];
+    let grid = |n: usize, shift: f32| -> Vec<Instance> {
+        (0..n)
+            .map(|i| Instance {
+                geometry: 0,
+                transform: Affine3A::from_translation(Vec3::new(3.0 * i as f32 + shift, 0.0, 0.0)),
+                instance_id: i as u32,
+                mask: 0xff,
+            })
+            .collect()
+    };
+    let mut scene = TwoLevelScene::new(geometries, &grid(4, 0.0)).unwrap();
+    let mut tracer = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    let rays: Vec<Ray> = (0..256)
+        .map(|i| Ray::new(Vec3::new(0.05 * i as f32 - 1.0, 0.3, -5.0), Vec3::new(0.0, 0.0, 1.0), 0.0, f32::INFINITY))
+        .collect();
+    let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let mut ray_buf =
+        Buffer::new(&ctx, (rays.len() * 32) as u64, storage, MemoryLocation::CpuToGpu, "engine rays").unwrap();
+    ray_buf.write(0, bytemuck::cast_slice(&rays)).unwrap();
+    let hit_buf =
+        Buffer::new(&ctx, (rays.len() * 32) as u64, storage, MemoryLocation::GpuToCpu, "engine hits").unwrap();
+    let traversal = Traversal::closest(Variant::Stack);
+    // SAFETY: both buffers live until the end of the test, after every wait.
+    let binding =
+        unsafe { tracer.bind(BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf), traversal).unwrap() };
+    let frame = |tracer: &TwoLevelTracer| -> kdtrace::Result<Vec<InstanceHit>> {
+        let mut recorded = Ok(());
+        ctx.submit_and_wait(|cmd| {
+            // SAFETY: `cmd` is recording; the binding and buffers outlive the wait.
+            recorded = unsafe { tracer.record_binding(cmd, &binding, rays.len() as u32, 0xff) };
+            let barrier = [vk::MemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+                .dst_access_mask(vk::AccessFlags::HOST_READ)];
+            // SAFETY: a barrier in a recording command buffer.
+            unsafe {
+                ctx.device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::PipelineStageFlags::HOST,
+                    vk::DependencyFlags::empty(),
+                    &barrier,
+                    &[],
+                    &[],
+                )
+            };
+        })?;
+        recorded?;
+        let words: &[kdtrace::twolevel::GpuInstanceHit] = bytemuck::cast_slice(hit_buf.read(0, rays.len() * 32)?);
+        Ok(words.iter().map(InstanceHit::from).collect())
+    };
+    for shift in [0.0, 1.5] {
+        scene.set_instances(&grid(4, shift)).unwrap();
+        tracer.set_instances(&scene).unwrap();
+        let recorded = frame(&tracer).unwrap();
+        let traced = tracer.trace(&rays, 0xff, traversal).unwrap();
+        assert_eq!(recorded, traced, "shift {shift}");
+        let ids: std::collections::BTreeSet<u32> =
+            recorded.iter().filter(|h| h.is_hit()).map(|h| h.instance_id).collect();
+        assert!(ids.len() >= 3 && recorded.iter().all(|h| !h.is_hit() || h.geometry_id == 3), "{ids:?}");
+    }
+    // Nine instances: the buffers grow and the binding made before is refused.
+    scene.set_instances(&grid(9, 0.0)).unwrap();
+    tracer.set_instances(&scene).unwrap();
+    let e = frame(&tracer).unwrap_err();
+    assert!(e.to_string().contains("bind again"), "{e}");
+    let e = tracer.trace(&rays, 0xff, Traversal { packet_width: 4, ..traversal }).unwrap_err();
+    assert!(e.to_string().contains("no two-level kernel"), "{e}");
+    drop(binding);
+    common::assert_validation_clean(&ctx);
+}

@@ -17,28 +17,54 @@ use crate::consts::{
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
-use crate::gpu::{in_order, shaders, Buffer, BufferSet, GpuContext, Kernel, KernelDesc};
+use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
 use crate::traversal::{Traversal, Variant};
 
 /// A [`TwoLevelScene`] on a device. Geometries are uploaded once;
 /// [`TwoLevelTracer::set_instances`] uploads only the instances and the top
-/// level. Traces with [`TwoLevelTracer::trace`] (submits and waits).
+/// level, in place while they fit (bindings stay valid).
+///
+/// Trace with [`TwoLevelTracer::trace`] (uploads the rays, submits, waits), or
+/// in an engine's command buffer with [`TwoLevelTracer::bind`] and
+/// [`TwoLevelTracer::record_binding`]: one dispatch, no barrier of kdtrace's
+/// own (the contract of [`crate::trace::Tracer::record_trace`]: make your ray
+/// writes visible to `COMPUTE_SHADER` reads before, and the hits to their reader
+/// after; the dispatch binds kdtrace's pipeline, set 0 and push constants).
 pub struct TwoLevelTracer {
     ctx: Arc<GpuContext>,
     nodes: Buffer,
     triangles: Buffer,
     geometries: Buffer,
     geometry_count: usize,
+    /// Instances, top-level nodes and the leaves' instance order, with room for
+    /// `capacity` instances.
     instances: Buffer,
     top: Buffer,
     order: Buffer,
+    capacity: usize,
     top_node_count: u32,
+    /// Incremented when the instance buffers are reallocated: older bindings are refused.
+    generation: u64,
     /// Pipelines by traversal, compiled on first use.
     kernels: Vec<(Traversal, Kernel)>,
 }
 
+/// The descriptor set of a two-level trace: the tracer's scene buffers, your ray
+/// and hit ranges and one traversal's pipeline. Keep it until every command
+/// buffer it was recorded into has completed.
+#[must_use = "the descriptor set must live until the command buffer that uses it completes"]
+pub struct TwoLevelBinding {
+    set: BufferSet,
+    kernel: usize,
+    generation: u64,
+    /// Rays the bound ranges hold.
+    capacity: u32,
+}
+
 const TEXEL: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
 const STORAGE: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_BUFFER;
+const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
+const HIT_BYTES: u64 = std::mem::size_of::<GpuInstanceHit>() as u64;
 
 impl TwoLevelTracer {
     /// Uploads `scene`: its geometries' trees and triangles, its instances and
@@ -73,28 +99,32 @@ impl TwoLevelTracer {
                 )));
             }
         }
-        let nodes = Buffer::with_data(ctx, bytemuck::cast_slice(&nodes), TEXEL, "two-level nodes")?;
-        let triangles = Buffer::with_data(ctx, bytemuck::cast_slice(&texels), TEXEL, "two-level triangles")?;
-        let geometry_count = geometries.len();
-        let geometries = Buffer::with_data(ctx, bytemuck::cast_slice(&geometries), STORAGE, "two-level geometries")?;
-        let (instances, top, order, top_node_count) = upload_instances(ctx, scene)?;
-        Ok(TwoLevelTracer {
+        let capacity = scene.placed.len().max(1);
+        let [instances, top, order] = instance_buffers(ctx, capacity)?;
+        let mut tracer = TwoLevelTracer {
             ctx: ctx.clone(),
-            nodes,
-            triangles,
-            geometries,
-            geometry_count,
+            nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&nodes), TEXEL, "two-level nodes")?,
+            triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&texels), TEXEL, "two-level triangles")?,
+            geometries: Buffer::with_data(ctx, bytemuck::cast_slice(&geometries), STORAGE, "two-level geometries")?,
+            geometry_count: geometries.len(),
             instances,
             top,
             order,
-            top_node_count,
+            capacity,
+            top_node_count: 0,
+            generation: 0,
             kernels: Vec::new(),
-        })
+        };
+        tracer.set_instances(scene)?;
+        Ok(tracer)
     }
 
     /// Uploads the instances and the top level of `scene`, which must hold the
     /// geometries this tracer was made with (after [`TwoLevelScene::set_instances`]).
-    /// Submits and waits; no trace of this tracer may be pending.
+    /// Written in place while they fit the buffers (bindings made before stay
+    /// valid); more instances than ever before reallocate them, and bindings made
+    /// before are then refused. Submits and waits: no trace of this tracer may be
+    /// pending.
     pub fn set_instances(&mut self, scene: &TwoLevelScene) -> Result<()> {
         if scene.geometries.len() != self.geometry_count {
             return Err(Error::InvalidInput(format!(
@@ -103,12 +133,79 @@ impl TwoLevelTracer {
                 self.geometry_count
             )));
         }
-        (self.instances, self.top, self.order, self.top_node_count) = upload_instances(&self.ctx, scene)?;
+        // The kernel's stack holds at most the BVH's depth + 1 entries (median
+        // splits: about log2 of the instance count).
+        let depth = bvh_depth(&scene.nodes, 0);
+        if depth + 1 >= MAX_TOP_STACK as usize {
+            return Err(Error::InvalidInput(format!(
+                "the top level is {depth} nodes deep; the kernel's stack holds {MAX_TOP_STACK}"
+            )));
+        }
+        let instances: Vec<GpuInstance> = scene
+            .placed
+            .iter()
+            .map(|p| GpuInstance {
+                row0: p.to_object[0],
+                row1: p.to_object[1],
+                row2: p.to_object[2],
+                geometry: p.instance.geometry as u32,
+                instance_id: p.instance.instance_id,
+                mask: u32::from(p.instance.mask),
+                pad: 0,
+            })
+            .collect();
+        let top: Vec<TopNode> = scene
+            .nodes
+            .iter()
+            .map(|n| TopNode {
+                bounds_min: [n.bounds.min.x, n.bounds.min.y, n.bounds.min.z, n.condition],
+                bounds_max: [n.bounds.max.x, n.bounds.max.y, n.bounds.max.z, 0.0],
+                index: n.index,
+                count: n.count,
+                pad0: 0,
+                pad1: 0,
+            })
+            .collect();
+        if instances.len() > self.capacity {
+            let capacity = instances.len().next_power_of_two();
+            [self.instances, self.top, self.order] = instance_buffers(&self.ctx, capacity)?;
+            self.capacity = capacity;
+            self.generation += 1;
+        }
+        let parts: [&[u8]; 3] =
+            [bytemuck::cast_slice(&instances), bytemuck::cast_slice(&top), bytemuck::cast_slice(&scene.order)];
+        let total: usize = parts.iter().map(|p| p.len()).sum();
+        if total > 0 {
+            let mut staging = Buffer::new(
+                &self.ctx,
+                total as u64,
+                vk::BufferUsageFlags::TRANSFER_SRC,
+                MemoryLocation::CpuToGpu,
+                "two-level instance staging",
+            )?;
+            let mut offset = 0;
+            let mut copies = Vec::new();
+            for (part, target) in parts.iter().zip([&self.instances, &self.top, &self.order]) {
+                if !part.is_empty() {
+                    staging.write(offset, part)?;
+                    let region = vk::BufferCopy { src_offset: offset as u64, dst_offset: 0, size: part.len() as u64 };
+                    copies.push((target.buffer, region));
+                }
+                offset += part.len();
+            }
+            self.ctx.submit_and_wait(|cmd| {
+                for (target, region) in &copies {
+                    // SAFETY: both buffers are alive and large enough; `cmd` is recording.
+                    unsafe { self.ctx.device.cmd_copy_buffer(cmd, staging.buffer, *target, &[*region]) };
+                }
+            })?;
+        }
+        self.top_node_count = top.len() as u32;
         Ok(())
     }
 
-    /// Bytes of the scene on the device (nodes, triangle texels, geometries,
-    /// instances, top level).
+    /// Bytes of the scene on the device: nodes, triangle texels, geometries,
+    /// and the instance buffers (with their spare room).
     pub fn device_bytes(&self) -> u64 {
         [&self.nodes, &self.triangles, &self.geometries, &self.instances, &self.top, &self.order]
             .iter()
@@ -116,13 +213,132 @@ impl TwoLevelTracer {
             .sum()
     }
 
+    /// Compiles the pipeline of `traversal` (done on first use otherwise).
+    ///
+    /// Errors: `Error::InvalidInput` for a traversal without a two-level kernel
+    /// (`backtrack`, `ropes`, packets) or an invalid one.
+    pub fn prepare(&mut self, traversal: Traversal) -> Result<()> {
+        self.kernel(traversal).map(|_| ())
+    }
+
     /// The closest (or, for an any-hit traversal, any) hit of each world ray
     /// among the instances visible to `mask`: the answers of
     /// [`TwoLevelScene::trace`] bit for bit. Submits and waits.
     ///
-    /// Errors: `Error::InvalidInput` for a traversal without a two-level kernel
-    /// (`backtrack`, `ropes`, packets) or an invalid one.
+    /// Errors: those of [`TwoLevelTracer::prepare`].
     pub fn trace(&mut self, rays: &[Ray], mask: u8, traversal: Traversal) -> Result<Vec<InstanceHit>> {
+        Ok(self.trace_timed(rays, mask, traversal)?.0)
+    }
+
+    /// [`TwoLevelTracer::trace`] and the dispatch's GPU time in seconds (`None`
+    /// where the queue has no timestamps).
+    pub fn trace_timed(
+        &mut self,
+        rays: &[Ray],
+        mask: u8,
+        traversal: Traversal,
+    ) -> Result<(Vec<InstanceHit>, Option<f64>)> {
+        self.prepare(traversal)?;
+        if rays.is_empty() {
+            return Ok((Vec::new(), None));
+        }
+        let ray_bytes: &[u8] = bytemuck::cast_slice(rays);
+        let mut ray_buf =
+            Buffer::new(&self.ctx, ray_bytes.len() as u64, STORAGE, MemoryLocation::CpuToGpu, "two-level rays")?;
+        ray_buf.write(0, ray_bytes)?;
+        let hit_bytes = rays.len() as u64 * HIT_BYTES;
+        let hit_buf = Buffer::new(&self.ctx, hit_bytes, STORAGE, MemoryLocation::GpuToCpu, "two-level hits")?;
+        // SAFETY: both buffers are this tracer's own storage buffers, alive until the wait.
+        let binding = unsafe { self.bind(BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf), traversal)? };
+        let timestamps = Timestamps::new(&self.ctx, 2)?;
+        let mut recorded = Ok(());
+        self.ctx.submit_and_wait(|cmd| {
+            // SAFETY: `cmd` is recording; the binding's buffers outlive the wait.
+            unsafe {
+                if let Some(t) = &timestamps {
+                    t.record_reset(cmd);
+                    t.record(cmd, 0);
+                }
+                recorded = self.record_binding(cmd, &binding, rays.len() as u32, mask);
+                if let Some(t) = &timestamps {
+                    t.record(cmd, 1);
+                }
+            }
+        })?;
+        recorded?;
+        let seconds = match &timestamps {
+            Some(t) => Some(t.seconds_between(0, 1)?),
+            None => None,
+        };
+        let hits: &[GpuInstanceHit] = bytemuck::cast_slice(hit_buf.read(0, hit_bytes as usize)?);
+        Ok((hits.iter().map(InstanceHit::from).collect(), seconds))
+    }
+
+    /// A binding of your ray range (32-byte [`Ray`]s, world space) and hit range
+    /// (32-byte [`GpuInstanceHit`]s) for `traversal`, to record with
+    /// [`TwoLevelTracer::record_binding`] as often as you like.
+    ///
+    /// # Safety
+    /// Both ranges lie in live storage buffers of this tracer's device (offsets
+    /// aligned to `minStorageBufferOffsetAlignment`) that outlive the binding's
+    /// use by any command buffer; they do not overlap.
+    pub unsafe fn bind(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        traversal: Traversal,
+    ) -> Result<TwoLevelBinding> {
+        if rays.overlaps(&hits) {
+            return Err(Error::InvalidInput("the ray and hit ranges overlap".into()));
+        }
+        let kernel = self.kernel(traversal)?;
+        let scene = [&self.nodes, &self.triangles, &self.geometries, &self.instances, &self.top, &self.order]
+            .map(BufferRange::whole);
+        let ranges = [scene[0], scene[1], rays, hits, scene[2], scene[3], scene[4], scene[5]];
+        // SAFETY: the scene buffers are this tracer's; the caller vouches for the rest.
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1, &ranges)? };
+        let capacity = (rays.range / RAY_BYTES).min(hits.range / HIT_BYTES).min(u64::from(u32::MAX)) as u32;
+        Ok(TwoLevelBinding { set, kernel, generation: self.generation, capacity })
+    }
+
+    /// Records into `cmd` the two-level trace of the first `count` rays of
+    /// `binding`'s ray range, visible to the instances whose mask shares a bit
+    /// with `mask`: one dispatch (nothing for `count` 0).
+    ///
+    /// Errors: `Error::InvalidInput` for a binding made before the instance
+    /// buffers were reallocated, or more rays than its ranges hold.
+    ///
+    /// # Safety
+    /// `cmd` is recording, outside a render pass, from a compute-capable queue
+    /// family of this device; the binding, this tracer and the bound buffers
+    /// live until it completes; the barriers of the type docs are yours.
+    pub unsafe fn record_binding(
+        &self,
+        cmd: vk::CommandBuffer,
+        binding: &TwoLevelBinding,
+        count: u32,
+        mask: u8,
+    ) -> Result<()> {
+        if binding.generation != self.generation {
+            return Err(Error::InvalidInput(
+                "the binding was made before set_instances reallocated the instance buffers: bind again".into(),
+            ));
+        }
+        if count > binding.capacity {
+            return Err(Error::InvalidInput(format!("{count} rays; the bound ranges hold {}", binding.capacity)));
+        }
+        if count > 0 {
+            let params =
+                TwoLevelParams { ray_count: count, mask: u32::from(mask), top_nodes: self.top_node_count, pad: 0 };
+            let kernel = &self.kernels[binding.kernel].1;
+            // SAFETY: the caller vouches for `cmd` and the lifetimes.
+            unsafe { kernel.record_dispatch(cmd, binding.set.set, bytemuck::bytes_of(&params), count) };
+        }
+        Ok(())
+    }
+
+    /// The index of the pipeline of `traversal`, compiled on first use.
+    fn kernel(&mut self, traversal: Traversal) -> Result<usize> {
         traversal.validate()?;
         if matches!(traversal.variant, Variant::Backtrack | Variant::Ropes) || traversal.uses_packets() {
             return Err(Error::InvalidInput(format!(
@@ -131,58 +347,15 @@ impl TwoLevelTracer {
                 if traversal.uses_packets() { " with packets" } else { "" }
             )));
         }
-        if rays.is_empty() {
-            return Ok(Vec::new());
-        }
         let key = Traversal {
             stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
             packet_width: 1,
             subgroup_size: None,
             ..traversal
         };
-        let kernel = match self.kernels.iter().position(|(k, _)| *k == key) {
-            Some(i) => i,
-            None => {
-                self.kernels.push((key, self.kernel(key)?));
-                self.kernels.len() - 1
-            }
-        };
-        let kernel = &self.kernels[kernel].1;
-        let ray_bytes: &[u8] = bytemuck::cast_slice(rays);
-        let mut ray_buf =
-            Buffer::new(&self.ctx, ray_bytes.len() as u64, STORAGE, MemoryLocation::CpuToGpu, "two-level rays")?;
-        ray_buf.write(0, ray_bytes)?;
-        let hit_bytes = (rays.len() * std::mem::size_of::<GpuInstanceHit>()) as u64;
-        let hit_buf = Buffer::new(&self.ctx, hit_bytes, STORAGE, MemoryLocation::GpuToCpu, "two-level hits")?;
-        let set = BufferSet::new(
-            &self.ctx,
-            kernel,
-            &[
-                &self.nodes,
-                &self.triangles,
-                &ray_buf,
-                &hit_buf,
-                &self.geometries,
-                &self.instances,
-                &self.top,
-                &self.order,
-            ],
-        )?;
-        let params = TwoLevelParams {
-            ray_count: rays.len() as u32,
-            mask: u32::from(mask),
-            top_nodes: self.top_node_count,
-            pad: 0,
-        };
-        self.ctx.submit_and_wait(|cmd| {
-            // SAFETY: `cmd` is recording; the set's buffers outlive the wait.
-            unsafe { kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(&params), rays.len() as u32) };
-        })?;
-        let hits: &[GpuInstanceHit] = bytemuck::cast_slice(hit_buf.read(0, hit_bytes as usize)?);
-        Ok(hits.iter().map(InstanceHit::from).collect())
-    }
-
-    fn kernel(&self, key: Traversal) -> Result<Kernel> {
+        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == key) {
+            return Ok(i);
+        }
         let spec = in_order::<_, { TRACE_SPECS as usize }>([
             (TRACE_SPEC_VARIANT, key.variant.id()),
             (TRACE_SPEC_COUNTERS, 0),
@@ -192,7 +365,7 @@ impl TwoLevelTracer {
             (TRACE_SPEC_ROBUST, key.robust as u32),
             (TRACE_SPEC_PASS, PASS_ONE),
         ]);
-        Kernel::new(
+        let kernel = Kernel::new(
             &self.ctx,
             &KernelDesc {
                 name: "trace_twolevel",
@@ -207,57 +380,26 @@ impl TwoLevelTracer {
                 ],
                 ..Default::default()
             },
-        )
+        )?;
+        self.kernels.push((key, kernel));
+        Ok(self.kernels.len() - 1)
     }
 }
 
-/// The instances, top-level nodes and leaf order of `scene` in device buffers.
-fn upload_instances(ctx: &Arc<GpuContext>, scene: &TwoLevelScene) -> Result<(Buffer, Buffer, Buffer, u32)> {
-    let instances: Vec<GpuInstance> = scene
-        .placed
-        .iter()
-        .map(|p| {
-            let m = &p.to_object;
-            GpuInstance {
-                row0: m[0],
-                row1: m[1],
-                row2: m[2],
-                geometry: p.instance.geometry as u32,
-                instance_id: p.instance.instance_id,
-                mask: u32::from(p.instance.mask),
-                pad: 0,
-            }
-        })
-        .collect();
-    let top: Vec<TopNode> = scene
-        .nodes
-        .iter()
-        .map(|n| TopNode {
-            bounds_min: [n.bounds.min.x, n.bounds.min.y, n.bounds.min.z, n.condition],
-            bounds_max: [n.bounds.max.x, n.bounds.max.y, n.bounds.max.z, 0.0],
-            index: n.index,
-            count: n.count,
-            pad0: 0,
-            pad1: 0,
-        })
-        .collect();
-    // The kernel's stack holds at most the BVH's depth + 1 entries (median splits:
-    // about log2 of the instance count).
-    let depth = bvh_depth(&scene.nodes, 0);
-    if !scene.nodes.is_empty() && depth + 1 >= MAX_TOP_STACK as usize {
-        return Err(Error::InvalidInput(format!(
-            "the top level is {depth} nodes deep; the kernel's stack holds {MAX_TOP_STACK}"
-        )));
-    }
-    Ok((
-        Buffer::with_data(ctx, bytemuck::cast_slice(&instances), STORAGE, "two-level instances")?,
-        Buffer::with_data(ctx, bytemuck::cast_slice(&top), STORAGE, "two-level top level")?,
-        Buffer::with_data(ctx, bytemuck::cast_slice(&scene.order), STORAGE, "two-level instance order")?,
-        top.len() as u32,
-    ))
+/// Device-local buffers for `capacity` instances: instances, top-level nodes
+/// (fewer than 2 per instance) and the leaves' instance order.
+fn instance_buffers(ctx: &Arc<GpuContext>, capacity: usize) -> Result<[Buffer; 3]> {
+    let usage = STORAGE | vk::BufferUsageFlags::TRANSFER_DST;
+    let n = capacity as u64;
+    let buffer = |bytes: u64, name: &str| Buffer::new(ctx, bytes, usage, MemoryLocation::GpuOnly, name);
+    Ok([
+        buffer(n * std::mem::size_of::<GpuInstance>() as u64, "two-level instances")?,
+        buffer(2 * n * std::mem::size_of::<TopNode>() as u64, "two-level top level")?,
+        buffer(n * 4, "two-level instance order")?,
+    ])
 }
 
-/// Depth of the BVH below node `n` (a leaf: 1).
+/// Depth of the BVH below node `n` (a leaf: 1; none: 0).
 fn bvh_depth(nodes: &[super::BvhNode], n: usize) -> usize {
     match nodes.get(n) {
         None => 0,
