@@ -223,8 +223,12 @@ fn gpu_two_level_equals_its_cpu_twin() {
 
 /// An engine's frame: its own ray and hit buffers, the two-level trace recorded
 /// into its command buffer (no submit of kdtrace's), hits equal to `trace`'s;
-/// moving instances in place keeps the binding; more instances than the buffers
-/// hold reallocate them and the old binding is refused. Validation clean.
+/// moving instances in place keeps the binding; a move recorded between two
+/// traces of one command buffer (`record_set_instances`) is seen by the second
+/// only, with no synchronization hazard (without kdtrace's barrier after the
+/// copies, validation reports SYNC-HAZARD-READ-AFTER-WRITE: checked by removing
+/// it); more instances than the buffers hold reallocate them and the old binding
+/// is refused. Validation clean.
 #[test]
 fn two_level_traces_record_into_an_engine_frame() {
     use kdtrace::ash::vk;
@@ -293,6 +297,55 @@ fn two_level_traces_record_into_an_engine_frame() {
             recorded.iter().filter(|h| h.is_hit()).map(|h| h.instance_id).collect();
         assert!(ids.len() >= 3 && recorded.iter().all(|h| !h.is_hit() || h.geometry_id == 3), "{ids:?}");
     }
+    // One command buffer: trace, record the move, trace again. The first trace
+    // reads the old instances, the second the new ones (kdtrace's barriers).
+    let hit_buf2 =
+        Buffer::new(&ctx, (rays.len() * 32) as u64, storage, MemoryLocation::GpuToCpu, "engine hits 2").unwrap();
+    // SAFETY: as `binding`.
+    let binding2 =
+        unsafe { tracer.bind(BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf2), traversal).unwrap() };
+    let before = tracer.trace(&rays, 0xff, traversal).unwrap();
+    scene.set_instances(&grid(4, -0.8)).unwrap();
+    let mut recorded = Ok(());
+    ctx.submit_and_wait(|cmd| {
+        // SAFETY: `cmd` is recording; bindings, buffers and tracer outlive the wait.
+        recorded = unsafe {
+            tracer
+                .record_binding(cmd, &binding, rays.len() as u32, 0xff)
+                .and_then(|_| tracer.record_set_instances(cmd, &scene, 1))
+                .and_then(|_| tracer.record_binding(cmd, &binding2, rays.len() as u32, 0xff))
+        };
+        let barrier = [vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)];
+        // SAFETY: a barrier in a recording command buffer.
+        unsafe {
+            ctx.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &barrier,
+                &[],
+                &[],
+            )
+        };
+    })
+    .unwrap();
+    recorded.unwrap();
+    let read = |b: &Buffer| -> Vec<InstanceHit> {
+        let words: &[kdtrace::twolevel::GpuInstanceHit] = bytemuck::cast_slice(b.read(0, rays.len() * 32).unwrap());
+        words.iter().map(InstanceHit::from).collect()
+    };
+    let after = tracer.trace(&rays, 0xff, traversal).unwrap();
+    assert_ne!(before, after, "the move should change some hits");
+    assert_eq!(read(&hit_buf), before, "the trace recorded before the update reads the old instances");
+    assert_eq!(read(&hit_buf2), after, "the trace recorded after it reads the new ones");
+    assert!(tracer.retired_bytes() > 0);
+    assert_eq!(tracer.release_retired(0), 0);
+    assert_eq!(tracer.release_retired(1), 1);
+    assert_eq!(tracer.retired_bytes(), 0);
+    drop(binding2);
     // Nine instances: the buffers grow and the binding made before is refused.
     scene.set_instances(&grid(9, 0.0)).unwrap();
     tracer.set_instances(&scene).unwrap();

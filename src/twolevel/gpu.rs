@@ -47,6 +47,15 @@ pub struct TwoLevelTracer {
     generation: u64,
     /// Pipelines by traversal, compiled on first use.
     kernels: Vec<(Traversal, Kernel)>,
+    /// Buffers a recorded update replaced or staged through, each under the
+    /// frame value that may still use them ([`TwoLevelTracer::release_retired`]).
+    retired: Vec<(u64, Buffer)>,
+}
+
+/// The device records of a scene's instances and top level.
+struct InstanceRecords {
+    instances: Vec<GpuInstance>,
+    top: Vec<TopNode>,
 }
 
 /// The descriptor set of a two-level trace: the tracer's scene buffers, your ray
@@ -114,6 +123,7 @@ impl TwoLevelTracer {
             top_node_count: 0,
             generation: 0,
             kernels: Vec::new(),
+            retired: Vec::new(),
         };
         tracer.set_instances(scene)?;
         Ok(tracer)
@@ -126,6 +136,123 @@ impl TwoLevelTracer {
     /// before are then refused. Submits and waits: no trace of this tracer may be
     /// pending.
     pub fn set_instances(&mut self, scene: &TwoLevelScene) -> Result<()> {
+        let records = self.records(scene)?;
+        if records.instances.len() > self.capacity {
+            let capacity = records.instances.len().next_power_of_two();
+            [self.instances, self.top, self.order] = instance_buffers(&self.ctx, capacity)?;
+            self.capacity = capacity;
+            self.generation += 1;
+        }
+        if let Some((staging, copies)) = self.stage(&records, scene)? {
+            self.ctx.submit_and_wait(|cmd| {
+                for (target, region) in &copies {
+                    // SAFETY: both buffers are alive and large enough; `cmd` is recording.
+                    unsafe { self.ctx.device.cmd_copy_buffer(cmd, staging.buffer, *target, &[*region]) };
+                }
+            })?;
+        }
+        self.top_node_count = records.top.len() as u32;
+        Ok(())
+    }
+
+    /// [`TwoLevelTracer::set_instances`] recorded into your command buffer `cmd`
+    /// (no submit, no wait): copies from a staging buffer into the instance
+    /// buffers, between two barriers of kdtrace's own on those buffers (earlier
+    /// traces' reads before the copies, the copies before later traces' reads).
+    /// So within `cmd` and after it on the queue, traces recorded before read the
+    /// old instances and traces recorded after read the new ones. The staging
+    /// buffer (and, when more instances than ever before reallocate the buffers,
+    /// the old ones) is kept under `frame` until [`TwoLevelTracer::release_retired`]
+    /// says that frame has completed; bindings made before a reallocation are then
+    /// refused.
+    ///
+    /// # Safety
+    /// `cmd` is recording, outside a render pass, on the queue family the traces
+    /// are recorded on; this tracer lives until it completes.
+    pub unsafe fn record_set_instances(
+        &mut self,
+        cmd: vk::CommandBuffer,
+        scene: &TwoLevelScene,
+        frame: u64,
+    ) -> Result<()> {
+        let records = self.records(scene)?;
+        if records.instances.len() > self.capacity {
+            let capacity = records.instances.len().next_power_of_two();
+            let fresh = instance_buffers(&self.ctx, capacity)?;
+            let [instances, top, order] = fresh;
+            for old in [
+                std::mem::replace(&mut self.instances, instances),
+                std::mem::replace(&mut self.top, top),
+                std::mem::replace(&mut self.order, order),
+            ] {
+                self.retired.push((frame, old));
+            }
+            self.capacity = capacity;
+            self.generation += 1;
+        }
+        if let Some((staging, copies)) = self.stage(&records, scene)? {
+            let device = &self.ctx.device;
+            let barriers = |src: vk::AccessFlags, dst: vk::AccessFlags| -> Vec<vk::BufferMemoryBarrier> {
+                copies
+                    .iter()
+                    .map(|(buffer, region)| {
+                        vk::BufferMemoryBarrier::default()
+                            .src_access_mask(src)
+                            .dst_access_mask(dst)
+                            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                            .buffer(*buffer)
+                            .offset(0)
+                            .size(region.size)
+                    })
+                    .collect()
+            };
+            // SAFETY: the caller vouches for `cmd`; the buffers live until it completes
+            // (the staging buffer is retired under `frame`).
+            unsafe {
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &barriers(vk::AccessFlags::empty(), vk::AccessFlags::TRANSFER_WRITE),
+                    &[],
+                );
+                for (target, region) in &copies {
+                    device.cmd_copy_buffer(cmd, staging.buffer, *target, &[*region]);
+                }
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::COMPUTE_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &barriers(vk::AccessFlags::TRANSFER_WRITE, vk::AccessFlags::SHADER_READ),
+                    &[],
+                );
+            }
+            self.retired.push((frame, staging));
+        }
+        self.top_node_count = records.top.len() as u32;
+        Ok(())
+    }
+
+    /// Destroys what recorded updates retired under frames up to `completed`;
+    /// returns how many buffers went.
+    pub fn release_retired(&mut self, completed: u64) -> usize {
+        let before = self.retired.len();
+        self.retired.retain(|(frame, _)| *frame > completed);
+        before - self.retired.len()
+    }
+
+    /// Bytes on the device still held for recorded updates.
+    pub fn retired_bytes(&self) -> u64 {
+        self.retired.iter().map(|(_, b)| b.size).sum()
+    }
+
+    /// The device records of `scene`'s instances and top level, checked.
+    fn records(&self, scene: &TwoLevelScene) -> Result<InstanceRecords> {
         if scene.geometries.len() != self.geometry_count {
             return Err(Error::InvalidInput(format!(
                 "the scene has {} geometries; this tracer was made with {}",
@@ -141,7 +268,7 @@ impl TwoLevelTracer {
                 "the top level is {depth} nodes deep; the kernel's stack holds {MAX_TOP_STACK}"
             )));
         }
-        let instances: Vec<GpuInstance> = scene
+        let instances = scene
             .placed
             .iter()
             .map(|p| GpuInstance {
@@ -154,7 +281,7 @@ impl TwoLevelTracer {
                 pad: 0,
             })
             .collect();
-        let top: Vec<TopNode> = scene
+        let top = scene
             .nodes
             .iter()
             .map(|n| TopNode {
@@ -166,42 +293,44 @@ impl TwoLevelTracer {
                 pad1: 0,
             })
             .collect();
-        if instances.len() > self.capacity {
-            let capacity = instances.len().next_power_of_two();
-            [self.instances, self.top, self.order] = instance_buffers(&self.ctx, capacity)?;
-            self.capacity = capacity;
-            self.generation += 1;
-        }
-        let parts: [&[u8]; 3] =
-            [bytemuck::cast_slice(&instances), bytemuck::cast_slice(&top), bytemuck::cast_slice(&scene.order)];
+        Ok(InstanceRecords { instances, top })
+    }
+
+    /// A staging buffer holding `records` and the scene's leaf order, with the
+    /// copies into the instance buffers; `None` when there is nothing to copy.
+    #[allow(clippy::type_complexity)]
+    fn stage(
+        &self,
+        records: &InstanceRecords,
+        scene: &TwoLevelScene,
+    ) -> Result<Option<(Buffer, Vec<(vk::Buffer, vk::BufferCopy)>)>> {
+        let parts: [&[u8]; 3] = [
+            bytemuck::cast_slice(&records.instances),
+            bytemuck::cast_slice(&records.top),
+            bytemuck::cast_slice(&scene.order),
+        ];
         let total: usize = parts.iter().map(|p| p.len()).sum();
-        if total > 0 {
-            let mut staging = Buffer::new(
-                &self.ctx,
-                total as u64,
-                vk::BufferUsageFlags::TRANSFER_SRC,
-                MemoryLocation::CpuToGpu,
-                "two-level instance staging",
-            )?;
-            let mut offset = 0;
-            let mut copies = Vec::new();
-            for (part, target) in parts.iter().zip([&self.instances, &self.top, &self.order]) {
-                if !part.is_empty() {
-                    staging.write(offset, part)?;
-                    let region = vk::BufferCopy { src_offset: offset as u64, dst_offset: 0, size: part.len() as u64 };
-                    copies.push((target.buffer, region));
-                }
-                offset += part.len();
-            }
-            self.ctx.submit_and_wait(|cmd| {
-                for (target, region) in &copies {
-                    // SAFETY: both buffers are alive and large enough; `cmd` is recording.
-                    unsafe { self.ctx.device.cmd_copy_buffer(cmd, staging.buffer, *target, &[*region]) };
-                }
-            })?;
+        if total == 0 {
+            return Ok(None);
         }
-        self.top_node_count = top.len() as u32;
-        Ok(())
+        let mut staging = Buffer::new(
+            &self.ctx,
+            total as u64,
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            MemoryLocation::CpuToGpu,
+            "two-level instance staging",
+        )?;
+        let mut offset = 0;
+        let mut copies = Vec::new();
+        for (part, target) in parts.iter().zip([&self.instances, &self.top, &self.order]) {
+            if !part.is_empty() {
+                staging.write(offset, part)?;
+                let region = vk::BufferCopy { src_offset: offset as u64, dst_offset: 0, size: part.len() as u64 };
+                copies.push((target.buffer, region));
+            }
+            offset += part.len();
+        }
+        Ok(Some((staging, copies)))
     }
 
     /// Bytes of the scene on the device: nodes, triangle texels, geometries,
