@@ -186,6 +186,56 @@ impl TwoLevelScene {
         Ok(scene)
     }
 
+    /// A two-level scene of engine-shaped geometries, each entry one placement:
+    /// entries of one geometry id whose untransformed triangles are equal share
+    /// one [`BottomLevel`] (built once, in object space); each entry becomes an
+    /// instance with its transform (identity when none) and instance id, mask
+    /// 0xff, in order. Also returns each entry's range in the numbering of
+    /// [`crate::scene::Scene::from_geometries`] for the same list.
+    ///
+    /// Errors: those of `Scene::from_geometries` and [`TwoLevelScene::new`].
+    pub fn from_geometries(
+        geometries: &[Geometry],
+        config: &BuildConfig,
+    ) -> Result<(TwoLevelScene, Vec<crate::scene::GeometryRange>)> {
+        let mut bottoms: Vec<BottomLevel> = Vec::new();
+        let mut instances = Vec::with_capacity(geometries.len());
+        let mut ranges = Vec::with_capacity(geometries.len());
+        let mut first = 0u32;
+        for g in geometries {
+            let mut triangles = Vec::new();
+            g.object_triangles(&mut triangles)?;
+            let index = match bottoms.iter().position(|b| b.id == g.id && b.triangles == triangles) {
+                Some(i) => i,
+                None => {
+                    bottoms.push(BottomLevel { id: g.id, tree: KdTree::build(&triangles, config), triangles });
+                    bottoms.len() - 1
+                }
+            };
+            let count = bottoms[index].triangles.len() as u32;
+            ranges.push(crate::scene::GeometryRange {
+                geometry_id: g.id,
+                instance_id: g.instance_id,
+                first_prim: first,
+                count,
+            });
+            first = first
+                .checked_add(count)
+                .filter(|&n| n < crate::consts::PRIM_INCOMPLETE)
+                .ok_or_else(|| Error::InvalidInput("too many triangles for the numbering of hits".into()))?;
+            instances.push(Instance {
+                geometry: index,
+                transform: g.transform.unwrap_or(Affine3A::IDENTITY),
+                instance_id: g.instance_id,
+                mask: 0xff,
+            });
+        }
+        if first == 0 {
+            return Err(Error::InvalidInput("scene has no triangles".into()));
+        }
+        Ok((TwoLevelScene::new(bottoms, &instances)?, ranges))
+    }
+
     /// Replaces the instances and rebuilds the top level only (the geometries'
     /// trees are kept). On error the scene is unchanged.
     pub fn set_instances(&mut self, instances: &[Instance]) -> Result<()> {

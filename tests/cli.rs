@@ -340,6 +340,40 @@ fn render_and_stats_read_gltf_with_its_camera() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("\"triangles\":6,"), "{}", String::from_utf8_lossy(&o.stdout));
 }
 
+/// `trace --two-level` on a glTF file whose mesh two nodes place (one rotated,
+/// scaled and moved) and a child's strip mesh: 2 geometries, 3 instances, and
+/// the hits in the flattened scene's numbering, equal to the flattened trace's
+/// but where the flattened vertices' rounding decides an edge.
+#[test]
+fn trace_two_level_keeps_the_scene_numbering() {
+    let (json, bin) = common::gltf_json(r#"{"byteLength": 60}"#, 3);
+    let scene = temp("instanced.glb");
+    std::fs::write(&scene, common::glb(&json, &bin)).unwrap();
+    let rays = temp("instanced.rays");
+    let o =
+        kdtrace(&["rays", scene.to_str().unwrap(), "-o", rays.to_str().unwrap(), "--width", "96", "--height", "72"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (flat, two) = (temp("instanced-flat.hits"), temp("instanced-two.hits"));
+    let o = kdtrace(&["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", flat.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let args = ["trace", scene.to_str().unwrap(), rays.to_str().unwrap(), "-o", two.to_str().unwrap(), "--two-level"];
+    let o = kdtrace(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2 geometries, 3 instances"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("validation:"), "{}", stderr(&o));
+    let (flat, two) = (kdtrace::io::read_hits(&flat).unwrap(), kdtrace::io::read_hits(&two).unwrap());
+    assert_eq!(flat.len(), two.len());
+    let same = flat.iter().zip(&two).filter(|(a, b)| a.prim_id == b.prim_id).count();
+    let prims: std::collections::BTreeSet<u32> = two.iter().filter(|h| h.is_hit()).map(|h| h.prim_id).collect();
+    assert!(same * 100 >= 99 * flat.len(), "{same} of {} rays hit the same triangle", flat.len());
+    assert!(prims.len() >= 2 && prims.iter().all(|&p| p < 6), "{prims:?}");
+    // Refused combinations say why.
+    let o = kdtrace(&[&args[..], &["--counters", "c.csv"]].concat());
+    assert!(!o.status.success() && stderr(&o).contains("--two-level"), "{}", stderr(&o));
+    let o = kdtrace(&[&args[..], &["--traversal", "ropes"]].concat());
+    assert!(!o.status.success() && stderr(&o).contains("no two-level kernel"), "{}", stderr(&o));
+}
+
 #[test]
 fn render_rejects_bad_options_with_a_message() {
     let scene = scene_path("teapot.obj");

@@ -9,6 +9,8 @@ use kdtrace::kdtree::traverse::Counters;
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::scene::Scene;
 use kdtrace::trace::{Backend, RayOrder, TraceOptions, TracePipelines, Tracer};
+use kdtrace::traversal::Traversal;
+use kdtrace::twolevel::TwoLevelTracer;
 
 use super::args::{TraversalArgs, TreeArgs};
 use super::common::{cached_context, load_and_build, trace_bar, Stages};
@@ -46,6 +48,13 @@ pub struct TraceArgs {
     /// pipelines, trace, write) on stderr.
     #[arg(long)]
     pub timings: bool,
+    /// Trace two-level (`kdtrace::twolevel`): a glTF file's meshes each once with
+    /// their own kd-tree, placed by their nodes (an OBJ file: one instance).
+    /// Hits keep the scene-order `prim_id` of the flattened scene. Variants
+    /// stack, restart, push-down and the short stacks, single rays; no counters,
+    /// --sort or --device-order; kd-tree backend.
+    #[arg(long)]
+    pub two_level: bool,
 }
 
 /// `kdtrace trace`: traces the ray file and writes the hits (file order), with
@@ -57,6 +66,9 @@ pub fn trace(args: TraceArgs) -> Result<()> {
     let mut stages = Stages::new(args.timings);
     let rays = kdtrace::io::read_rays(&args.rays)?;
     stages.mark("read the rays");
+    if args.two_level {
+        return trace_two_level(&args, traversal, &rays, stages);
+    }
     let order = if args.device_order { RayOrder::Coherent } else { RayOrder::AsGiven };
     let options = TraceOptions { traversal, counters: args.counters.is_some(), order };
     // The device and the pipelines come up on another thread while the scene
@@ -151,6 +163,57 @@ pub fn trace(args: TraceArgs) -> Result<()> {
     }
     stages.print();
     match Unfinished::from_hits(&result.hits) {
+        Some(u) => Err(u.into()),
+        None => Ok(()),
+    }
+}
+
+/// `kdtrace trace --two-level`.
+fn trace_two_level(args: &TraceArgs, traversal: Traversal, rays: &[kdtrace::Ray], mut stages: Stages) -> Result<()> {
+    if args.counters.is_some() || args.sort || args.device_order || args.traversal.backend != Backend::KdTree {
+        anyhow::bail!("--two-level traces with the kd-tree backend, without --counters, --sort or --device-order");
+    }
+    let config = args.tree.builder.apply(BuildConfig::default())?;
+    let (scene, ranges) = Scene::load_two_level(&args.scene, &config)?;
+    stages.mark("load the scene and build its trees");
+    let ctx = cached_context(&[Backend::KdTree])?;
+    let mut tracer = TwoLevelTracer::new(&ctx, &scene)?;
+    tracer.prepare(traversal)?;
+    stages.mark("upload the scene and compile");
+    let (hits, seconds) = tracer.trace_timed(rays, 0xff, traversal)?;
+    stages.mark("trace");
+    // Back to the flattened scene's numbering.
+    let hits: Vec<kdtrace::Hit> = hits
+        .iter()
+        .map(|h| {
+            let prim_id = match ranges.get(h.instance_index as usize) {
+                Some(r) if h.is_hit() => r.first_prim + h.prim_index,
+                _ => h.prim_index,
+            };
+            kdtrace::Hit { t: h.t, prim_id, u: h.u, v: h.v }
+        })
+        .collect();
+    kdtrace::io::write_hits(&args.output, &hits)?;
+    stages.mark("write the hits");
+    let hit_count = hits.iter().filter(|h| h.is_hit()).count();
+    eprintln!(
+        "{} rays, {hit_count} hits on {}: {} geometries, {} instances, {:.2} MiB on the device",
+        rays.len(),
+        ctx.info.name,
+        scene.geometries().len(),
+        scene.instance_count(),
+        tracer.device_bytes() as f64 / (1 << 20) as f64
+    );
+    if let Some(s) = seconds.filter(|&s| s > 0.0) {
+        eprintln!(
+            "two-level traversal ({}): {:.3} ms GPU = {:.2} M rays/s",
+            traversal.variant.name(),
+            s * 1e3,
+            rays.len() as f64 / s / 1e6
+        );
+    }
+    stages.print();
+    match Unfinished::from_hits(&hits) {
         Some(u) => Err(u.into()),
         None => Ok(()),
     }

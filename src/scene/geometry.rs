@@ -170,6 +170,11 @@ impl<'a> Geometry<'a> {
         }
     }
 
+    /// The triangles before the transform, checked as [`Geometry::world_triangles`].
+    pub(crate) fn object_triangles(&self, out: &mut Vec<[Vec3; 3]>) -> Result<()> {
+        Geometry { transform: None, ..*self }.world_triangles(out)
+    }
+
     /// The world-space triangles, checked: every index in range, every used
     /// position finite before and after the transform.
     pub(crate) fn world_triangles(&self, out: &mut Vec<[Vec3; 3]>) -> Result<()> {

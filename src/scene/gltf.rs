@@ -25,6 +25,51 @@ type Placed = (u32, u32, u32, Affine3A, Vec<Vec3>, Vec<u32>);
 
 /// Loads a `.gltf` or `.glb` file (see the module docs).
 pub(super) fn load(path: &Path) -> Result<Scene> {
+    let (data, materials, camera) = load_placed(path)?;
+    let geometries = geometries_of(&data);
+    let mut scene = Scene::from_geometries(&geometries, materials).map_err(|e| match e {
+        Error::InvalidInput(m) => scene_error(path, None, m),
+        e => e,
+    })?;
+    scene.path = Some(path.to_path_buf());
+    scene.camera = camera;
+    Ok(scene)
+}
+
+/// The placed primitives of a `.gltf` or `.glb` file as two-level input: each
+/// mesh primitive once (its geometry id; object space), placed by its nodes
+/// (instance id: the node's index), and the ranges its placements take in the
+/// flattened numbering of [`load`].
+pub(super) fn load_two_level(
+    path: &Path,
+    config: &crate::kdtree::BuildConfig,
+) -> Result<(crate::twolevel::TwoLevelScene, Vec<super::GeometryRange>)> {
+    let (data, _, _) = load_placed(path)?;
+    crate::twolevel::TwoLevelScene::from_geometries(&geometries_of(&data), config).map_err(|e| match e {
+        Error::InvalidInput(m) => scene_error(path, None, m),
+        e => e,
+    })
+}
+
+/// The placed primitives as geometries (borrowing `data`).
+fn geometries_of(data: &[Placed]) -> Vec<Geometry<'_>> {
+    data.iter()
+        .map(|(id, instance, material, transform, positions, indices)| {
+            let g = Geometry::new(*id, positions)
+                .with_indices(Indices::U32(indices))
+                .with_instance_id(*instance)
+                .with_material(*material);
+            if *transform == Affine3A::IDENTITY {
+                g
+            } else {
+                g.with_transform(*transform)
+            }
+        })
+        .collect()
+}
+
+/// The file's placed primitives, materials and first perspective camera.
+fn load_placed(path: &Path) -> Result<(Vec<Placed>, Vec<Material>, Option<Camera>)> {
     let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
     let err = |message: String| scene_error(path, None, message);
     let file = gltf::Gltf::from_slice(&bytes).map_err(|e| err(format!("not a valid glTF 2.0 file: {e}")))?;
@@ -137,27 +182,7 @@ pub(super) fn load(path: &Path) -> Result<Scene> {
             data.push((geometry_id, node.index() as u32, material, transform, positions, indices));
         }
     }
-    let geometries: Vec<Geometry> = data
-        .iter()
-        .map(|(id, instance, material, transform, positions, indices)| {
-            let g = Geometry::new(*id, positions)
-                .with_indices(Indices::U32(indices))
-                .with_instance_id(*instance)
-                .with_material(*material);
-            if *transform == Affine3A::IDENTITY {
-                g
-            } else {
-                g.with_transform(*transform)
-            }
-        })
-        .collect();
-    let mut scene = Scene::from_geometries(&geometries, materials).map_err(|e| match e {
-        Error::InvalidInput(m) => err(m),
-        e => e,
-    })?;
-    scene.path = Some(path.to_path_buf());
-    scene.camera = camera;
-    Ok(scene)
+    Ok((data, materials, camera))
 }
 
 /// The bytes of a buffer URI: a `data:` URI in base64, or a file relative to

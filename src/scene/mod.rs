@@ -131,6 +131,33 @@ impl Scene {
         return Err(text::scene_error(path, None, "reading OBJ needs kdtrace's `obj` feature"));
     }
 
+    /// A scene file as a two-level scene ([`crate::twolevel`]): a glTF file's mesh
+    /// primitives each once with their own kd-trees, placed by the nodes that use
+    /// them (instance id: the node's index, mask 0xff); an OBJ file as one
+    /// geometry (id 0) placed once without transform. Also returns each
+    /// instance's range in the numbering [`Scene::load`] gives the same file, so
+    /// that a hit's `prim_id` there is `ranges[instance_index].first_prim + prim_index`.
+    ///
+    /// Errors: those of [`Scene::load`].
+    #[cfg(any(feature = "obj", feature = "gltf", test))]
+    pub fn load_two_level(
+        path: &Path,
+        config: &crate::kdtree::BuildConfig,
+    ) -> Result<(crate::twolevel::TwoLevelScene, Vec<GeometryRange>)> {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+        if ext == "gltf" || ext == "glb" {
+            #[cfg(feature = "gltf")]
+            return gltf::load_two_level(path, config);
+        }
+        let scene = Scene::load(path)?;
+        let n = scene.triangles.len() as u32;
+        let bottom = crate::twolevel::BottomLevel::new(0, scene.triangles, config);
+        let identity =
+            crate::twolevel::Instance { geometry: 0, transform: glam::Affine3A::IDENTITY, instance_id: 0, mask: 0xff };
+        let two = crate::twolevel::TwoLevelScene::new(vec![bottom], &[identity])?;
+        Ok((two, vec![GeometryRange { geometry_id: 0, instance_id: 0, first_prim: 0, count: n }]))
+    }
+
     #[cfg(any(feature = "obj", test))]
     fn load_obj(path: &Path) -> Result<Scene> {
         let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;

@@ -356,3 +356,31 @@ fn top_level_rebuild_times() {
         );
     }
 }
+
+/// Placements of one geometry id share a tree; the ranges are those of the
+/// flattened scene, so that `first_prim + prim_index` is its `prim_id`.
+#[test]
+fn geometries_placed_twice_share_one_tree_and_keep_the_flat_numbering() {
+    use crate::scene::{Geometry, Scene};
+    let ball = sphere(6, 9);
+    let cube: Vec<Vec3> = sphere(3, 4).into_iter().flatten().collect();
+    let ball_points: Vec<Vec3> = ball.iter().flatten().copied().collect();
+    let moved = Affine3A::from_scale_rotation_translation(Vec3::splat(0.5), Quat::from_rotation_z(0.3), Vec3::X * 4.0);
+    let geometries = [
+        Geometry::new(5, &ball_points).with_instance_id(10),
+        Geometry::new(6, &cube).with_instance_id(11).with_transform(Affine3A::from_translation(Vec3::Y * 4.0)),
+        Geometry::new(5, &ball_points).with_instance_id(12).with_transform(moved),
+    ];
+    let (scene, ranges) = TwoLevelScene::from_geometries(&geometries, &BuildConfig::default()).unwrap();
+    let flat = Scene::from_geometries(&geometries, Vec::new()).unwrap();
+    assert_eq!(scene.geometries().len(), 2);
+    assert_eq!(scene.instance_count(), 3);
+    assert_eq!(ranges, flat.geometries);
+    // A ray at the moved ball's centre: its hit, renumbered, is the flattened scene's triangle.
+    let ray = Ray::new(Vec3::new(4.0, 0.0, -5.0), Vec3::Z, 0.0, f32::INFINITY);
+    let hit = scene.trace(&ray, 0xff, Traversal::closest(Variant::Stack));
+    assert_eq!(hit.instance_id, 12);
+    let prim_id = ranges[hit.instance_index as usize].first_prim + hit.prim_index;
+    let at = flat.locate(prim_id).unwrap();
+    assert_eq!((at.instance_id, at.geometry_id, at.prim_index), (12, 5, hit.prim_index));
+}
