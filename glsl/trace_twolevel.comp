@@ -31,6 +31,8 @@ layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;
 layout(constant_id = TRACE_SPEC_PACKET_WIDTH) const uint PACKET_WIDTH = 1u;   // single rays only
 layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;
 layout(constant_id = TRACE_SPEC_PASS) const uint PASS = PASS_ONE;
+// The scene has one instance: no top-level loop (src/twolevel/gpu.rs picks this pipeline then).
+layout(constant_id = TL_SPEC_ONE_INSTANCE) const bool ONE_INSTANCE = false;
 
 const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 
@@ -145,6 +147,30 @@ Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
     return final_hit(best, r, finished);
 }
 
+// Traces instance `i` if the dispatch's mask sees it, keeping the closest hit in
+// `best` (CPU twin: the instance loop of `TwoLevelScene::trace`); `incomplete`
+// notes an instance cut short. True when an any-hit trace is done.
+bool visit_instance(uint i, Ray ray, inout GpuInstanceHit best, inout bool incomplete) {
+    GpuInstance inst = instances[i];
+    if ((inst.mask & params.mask) == 0u) return false;
+    GpuGeometry g = geometries[inst.geometry];
+    Ray object = object_ray(inst, ray);
+    object.tmax = min(best.t, ray.tmax);
+    uint reference;
+    Hit hit = trace_instance(object, g, reference);
+    if (hit.prim_id >= PRIM_INCOMPLETE) {
+        // Cut short (or an object ray the transform made invalid).
+        if (hit.prim_id != PRIM_MISS) incomplete = true;
+        return false;
+    }
+    if (hit.t <= best.t || best.prim_index >= PRIM_INCOMPLETE) {
+        best = GpuInstanceHit(hit.t, hit.prim_id, hit.u, hit.v, inst.instance_id, g.id,
+                              front_facing(reference, traced_dir(object.dir)) ? 1u : 0u, i);
+        return ANY_HIT;
+    }
+    return false;
+}
+
 void trace_world(uint index) {
     Ray ray = ray_from_words(ray_words[2u * index], ray_words[2u * index + 1u]);
     GpuInstanceHit best = GpuInstanceHit(uintBitsToFloat(0x7f800000u), PRIM_MISS, 0.0, 0.0, 0xffffffffu, 0xffffffffu,
@@ -169,7 +195,18 @@ void trace_world(uint index) {
     uint stack[MAX_TOP_STACK];
     stack[0] = 0u;
     uint sp = 1u;
-    while (sp > 0u && !done) {
+    if (ONE_INSTANCE) {
+        // The top level is one leaf holding one instance: its box, then the
+        // instance, with no loop around the object-space traversal (lavapipe runs
+        // a loop's body under the loop's mask; see docs/EMBEDDING.md).
+        TopNode node = top_nodes[0];
+        float entry;
+        precise float widen = far_scale * node.bounds_min.w;
+        if (enters_box(node.bounds_min.xyz, node.bounds_max.xyz, widen, o, d, inv, ray.tmin, ray.tmax, entry)) {
+            done = visit_instance(top_order[0], ray, best, incomplete);
+        }
+        sp = 0u;
+    } else while (sp > 0u && !done) {
         // Every pass pops one node, each pushed at most once: the loop ends, and
         // one the driver ends early leaves entries, caught below.
         --sp;
@@ -201,26 +238,9 @@ void trace_world(uint index) {
             continue;
         }
         for (uint k = node.index; k < node.index + node.count; ++k) {
-            uint i = top_order[k];
-            GpuInstance inst = instances[i];
-            if ((inst.mask & params.mask) == 0u) continue;
-            GpuGeometry g = geometries[inst.geometry];
-            Ray object = object_ray(inst, ray);
-            object.tmax = min(best.t, ray.tmax);
-            uint reference;
-            Hit hit = trace_instance(object, g, reference);
-            if (hit.prim_id >= PRIM_INCOMPLETE) {
-                // Cut short (or an object ray the transform made invalid).
-                if (hit.prim_id != PRIM_MISS) incomplete = true;
-                continue;
-            }
-            if (hit.t <= best.t || best.prim_index >= PRIM_INCOMPLETE) {
-                best = GpuInstanceHit(hit.t, hit.prim_id, hit.u, hit.v, inst.instance_id, g.id,
-                                      front_facing(reference, traced_dir(object.dir)) ? 1u : 0u, i);
-                if (ANY_HIT) {
-                    done = true;
-                    break;
-                }
+            if (visit_instance(top_order[k], ray, best, incomplete)) {
+                done = true;
+                break;
             }
         }
     }

@@ -131,6 +131,8 @@ pub const TL_BINDING_TOP: u32 = 6;
 pub const TL_BINDING_ORDER: u32 = 7;
 /// Number of bindings of the two-level kernel.
 pub const TL_BINDINGS: u32 = 8;
+/// Specialization constant id of the two-level kernel's one-instance mode (after the trace kernel's).
+pub const TL_SPEC_ONE_INSTANCE: u32 = TRACE_SPECS;
 /// Entries of the two-level kernel's top-level stack: the BVH's depth must stay below it.
 pub const MAX_TOP_STACK: u32 = 64;
 
@@ -273,6 +275,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("TL_BINDING_TOP", TL_BINDING_TOP),
     ("TL_BINDING_ORDER", TL_BINDING_ORDER),
     ("MAX_TOP_STACK", MAX_TOP_STACK),
+    ("TL_SPEC_ONE_INSTANCE", TL_SPEC_ONE_INSTANCE),
     ("ORDER_CELL_BITS", ORDER_CELL_BITS),
     ("ORDER_WORKGROUP_SIZE", ORDER_WORKGROUP_SIZE),
     ("ORDER_BUCKETS", ORDER_BUCKETS),

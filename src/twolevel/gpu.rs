@@ -11,9 +11,9 @@ use gpu_allocator::MemoryLocation;
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    MAX_TOP_STACK, PASS_ONE, TL_BINDINGS, TL_BINDING_NODES, TL_BINDING_TRIANGLES, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
-    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
-    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    MAX_TOP_STACK, PASS_ONE, TL_BINDINGS, TL_BINDING_NODES, TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS,
+    TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST,
+    TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
@@ -45,8 +45,11 @@ pub struct TwoLevelTracer {
     top_node_count: u32,
     /// Incremented when the instance buffers are reallocated: older bindings are refused.
     generation: u64,
-    /// Pipelines by traversal, compiled on first use.
-    kernels: Vec<(Traversal, Kernel)>,
+    /// Pipelines by traversal, compiled on first use: the general one, and while
+    /// the scene has one instance the one without a top-level loop.
+    kernels: Vec<(Traversal, Kernel, Option<Kernel>)>,
+    /// The scene has exactly one instance.
+    one_instance: bool,
     /// Buffers a recorded update replaced or staged through, each under the
     /// frame value that may still use them ([`TwoLevelTracer::release_retired`]).
     retired: Vec<(u64, Buffer)>,
@@ -123,6 +126,7 @@ impl TwoLevelTracer {
             top_node_count: 0,
             generation: 0,
             kernels: Vec::new(),
+            one_instance: false,
             retired: Vec::new(),
         };
         tracer.set_instances(scene)?;
@@ -152,6 +156,8 @@ impl TwoLevelTracer {
             })?;
         }
         self.top_node_count = records.top.len() as u32;
+        self.one_instance = records.instances.len() == 1;
+        self.compile_one_instance()?;
         Ok(())
     }
 
@@ -235,6 +241,8 @@ impl TwoLevelTracer {
             self.retired.push((frame, staging));
         }
         self.top_node_count = records.top.len() as u32;
+        self.one_instance = records.instances.len() == 1;
+        self.compile_one_instance()?;
         Ok(())
     }
 
@@ -459,7 +467,11 @@ impl TwoLevelTracer {
         if count > 0 {
             let params =
                 TwoLevelParams { ray_count: count, mask: u32::from(mask), top_nodes: self.top_node_count, pad: 0 };
-            let kernel = &self.kernels[binding.kernel].1;
+            let (_, general, one) = &self.kernels[binding.kernel];
+            let kernel = match one {
+                Some(one) if self.one_instance => one,
+                _ => general,
+            };
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
             unsafe { kernel.record_dispatch(cmd, binding.set.set, bytemuck::bytes_of(&params), count) };
         }
@@ -482,37 +494,59 @@ impl TwoLevelTracer {
             subgroup_size: None,
             ..traversal
         };
-        if let Some(i) = self.kernels.iter().position(|(k, _)| *k == key) {
-            return Ok(i);
-        }
-        let spec = in_order::<_, { TRACE_SPECS as usize }>([
-            (TRACE_SPEC_VARIANT, key.variant.id()),
-            (TRACE_SPEC_COUNTERS, 0),
-            (TRACE_SPEC_STACK_SIZE, key.stack_size),
-            (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
-            (TRACE_SPEC_PACKET_WIDTH, 1),
-            (TRACE_SPEC_ROBUST, key.robust as u32),
-            (TRACE_SPEC_PASS, PASS_ONE),
-        ]);
-        let kernel = Kernel::new(
-            &self.ctx,
-            &KernelDesc {
-                name: "trace_twolevel",
-                spirv: shaders::TRACE_TWOLEVEL,
-                bindings: TL_BINDINGS,
-                push_constant_size: std::mem::size_of::<TwoLevelParams>() as u32,
-                spec_constants: &spec,
-                workgroup_size: TRACE_WORKGROUP_SIZE,
-                texel_buffers: &[
-                    (TL_BINDING_NODES, vk::Format::R32G32_UINT),
-                    (TL_BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
-                ],
-                ..Default::default()
-            },
-        )?;
-        self.kernels.push((key, kernel));
-        Ok(self.kernels.len() - 1)
+        let index = match self.kernels.iter().position(|(k, _, _)| *k == key) {
+            Some(i) => i,
+            None => {
+                let general = compile(&self.ctx, key, false)?;
+                self.kernels.push((key, general, None));
+                self.kernels.len() - 1
+            }
+        };
+        self.compile_one_instance()?;
+        Ok(index)
     }
+
+    /// When the scene has one instance, the one-instance pipeline of every
+    /// traversal compiled so far (what `record_binding` then dispatches).
+    fn compile_one_instance(&mut self) -> Result<()> {
+        if !self.one_instance {
+            return Ok(());
+        }
+        for entry in self.kernels.iter_mut().filter(|e| e.2.is_none()) {
+            entry.2 = Some(compile(&self.ctx, entry.0, true)?);
+        }
+        Ok(())
+    }
+}
+
+/// The two-level pipeline of `key` (normalized), for a scene of one instance or any.
+fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<Kernel> {
+    let spec = in_order::<_, { TRACE_SPECS as usize + 1 }>([
+        (TRACE_SPEC_VARIANT, key.variant.id()),
+        (TRACE_SPEC_COUNTERS, 0),
+        (TRACE_SPEC_STACK_SIZE, key.stack_size),
+        (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
+        (TRACE_SPEC_PACKET_WIDTH, 1),
+        (TRACE_SPEC_ROBUST, key.robust as u32),
+        (TRACE_SPEC_PASS, PASS_ONE),
+        (TL_SPEC_ONE_INSTANCE, one_instance as u32),
+    ]);
+    Kernel::new(
+        ctx,
+        &KernelDesc {
+            name: "trace_twolevel",
+            spirv: shaders::TRACE_TWOLEVEL,
+            bindings: TL_BINDINGS,
+            push_constant_size: std::mem::size_of::<TwoLevelParams>() as u32,
+            spec_constants: &spec,
+            workgroup_size: TRACE_WORKGROUP_SIZE,
+            texel_buffers: &[
+                (TL_BINDING_NODES, vk::Format::R32G32_UINT),
+                (TL_BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
+            ],
+            ..Default::default()
+        },
+    )
 }
 
 /// Device-local buffers for `capacity` instances: instances, top-level nodes
