@@ -374,3 +374,42 @@ fn two_level_traces_record_into_an_engine_frame() {
     drop(binding);
     common::assert_validation_clean(&ctx);
 }
+
+/// Edge cases, GPU against the CPU twin bit for bit: no instance, an instance of
+/// a geometry without triangles (alone: the one-instance pipeline; and beside
+/// another), a zero mask, a ray whose segment ends before the scene.
+#[test]
+fn two_level_edge_cases_match_the_cpu_twin() {
+    let ctx = common::context();
+    let config = BuildConfig::default();
+    let geometries =
+        vec![BottomLevel::new(1, Vec::new(), &config), BottomLevel::new(2, common::sphere(2, 0.1, 3), &config)];
+    let mut scene = TwoLevelScene::new(geometries, &[]).unwrap();
+    let mut tracer = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    let mut rng = common::Rng(5);
+    let mut rays = common::random_rays(&mut rng, Vec3::splat(-2.0), Vec3::splat(5.0), 300);
+    rays.push(Ray::new(Vec3::new(-10.0, 0.0, 0.0), Vec3::X, 0.0, 1.0));
+    let place = |geometry: usize, x: f32| Instance {
+        geometry,
+        transform: Affine3A::from_translation(Vec3::X * x),
+        instance_id: geometry as u32,
+        mask: 1,
+    };
+    for instances in [vec![], vec![place(0, 0.0)], vec![place(0, 0.0), place(1, 3.0)], vec![place(1, 0.0)]] {
+        scene.set_instances(&instances).unwrap();
+        tracer.set_instances(&scene).unwrap();
+        for (mask, traversal) in [
+            (0xffu8, Traversal::closest(Variant::Stack)),
+            (0, Traversal::closest(Variant::Stack)),
+            (1, Traversal { any_hit: true, ..Traversal::closest(Variant::Restart) }),
+        ] {
+            let gpu = tracer.trace(&rays, mask, traversal).unwrap();
+            let cpu: Vec<InstanceHit> = rays.iter().map(|r| scene.trace(r, mask, traversal)).collect();
+            assert_eq!(gpu, cpu, "{} instances, mask {mask}", instances.len());
+            let hits = gpu.iter().filter(|h| h.is_hit()).count();
+            let sphere_visible = mask != 0 && instances.iter().any(|i| i.geometry == 1);
+            assert_eq!(hits > 0, sphere_visible, "{} instances, mask {mask}: {hits} hits", instances.len());
+        }
+    }
+    common::assert_validation_clean(&ctx);
+}
