@@ -195,19 +195,28 @@ fn instanced_any_hits_are_exact_for_their_object_rays() {
         for (k, ray) in rays.iter_mut().enumerate() {
             ray.tmax = [0.5, 0.999, 1.0, 1.001, 2.0][k % 5];
         }
-        let traversal = Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) };
-        let (mut agree, mut serious, mut hits) = (0, 0, 0);
-        for ray in &rays {
-            let hit = scene.trace(ray, 0xff, traversal);
-            hits += usize::from(hit.is_hit());
-            let v = scene.verdict_any(ray, &hit);
-            agree += usize::from(v.agrees());
-            serious += usize::from(v.is_serious());
+        for variant in Variant::ALL {
+            let traversal = Traversal { any_hit: true, ..Traversal::closest(variant) };
+            let (mut agree, mut serious, mut hits) = (0, 0, 0);
+            for ray in &rays {
+                let hit = scene.trace(ray, 0xff, traversal);
+                hits += usize::from(hit.is_hit());
+                let v = scene.verdict_any(ray, &hit);
+                agree += usize::from(v.agrees());
+                serious += usize::from(v.is_serious());
+            }
+            let share = agree as f64 / rays.len() as f64;
+            eprintln!(
+                "{category} {variant:?} any hit: {:.1} % agree, {hits} occluded, {serious} serious",
+                100.0 * share
+            );
+            assert!(
+                share >= 0.995 && serious == 0,
+                "{category} {variant:?}: {agree}/{} agree, {serious} serious",
+                rays.len()
+            );
+            assert!(hits > rays.len() / 5 && hits < rays.len(), "{category}: {hits} occluded of {}", rays.len());
         }
-        let share = agree as f64 / rays.len() as f64;
-        eprintln!("{category} any hit: {:.1} % agree, {hits} occluded, {serious} serious", 100.0 * share);
-        assert!(share >= 0.995 && serious == 0, "{category}: {agree}/{} agree, {serious} serious", rays.len());
-        assert!(hits > rays.len() / 5 && hits < rays.len(), "{category}: {hits} occluded of {}", rays.len());
     }
 }
 
