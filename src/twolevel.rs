@@ -308,6 +308,21 @@ impl TwoLevelScene {
         self.placed.len()
     }
 
+    /// Bytes [`TwoLevelTracer::new`] uploads for this scene: per geometry its
+    /// nodes (8 bytes each) and a 48-byte triangle per leaf reference, 48 bytes
+    /// of geometry record; per instance 64 bytes, two top-level nodes' room (48
+    /// bytes each) and a 4-byte order entry (room for one instance at least).
+    pub fn device_bytes(&self) -> u64 {
+        let nodes: u64 = self.geometries.iter().map(|g| g.tree.nodes.len() as u64).sum();
+        let refs: u64 = self.geometries.iter().map(|g| g.tree.prim_indices.len() as u64).sum();
+        let room = self.placed.len().max(1) as u64;
+        let at_least_4 = |b: u64| b.max(4);
+        at_least_4(8 * nodes)
+            + at_least_4(48 * refs)
+            + at_least_4(48 * self.geometries.len() as u64)
+            + room * (64 + 2 * 48 + 4)
+    }
+
     /// Top-level nodes (for statistics).
     pub fn top_level_nodes(&self) -> usize {
         self.nodes.len()

@@ -367,6 +367,9 @@ fn trace_two_level_keeps_the_scene_numbering() {
     let prims: std::collections::BTreeSet<u32> = two.iter().filter(|h| h.is_hit()).map(|h| h.prim_id).collect();
     assert!(same * 100 >= 99 * flat.len(), "{same} of {} rays hit the same triangle", flat.len());
     assert!(prims.len() >= 2 && prims.iter().all(|&p| p < 6), "{prims:?}");
+    let o = kdtrace(&["stats", scene.to_str().unwrap(), "--json", "--two-level"]);
+    let json = String::from_utf8_lossy(&o.stdout);
+    assert!(json.contains("\"two_level_geometries\":2,\"two_level_instances\":3"), "{json}");
     // Refused combinations say why.
     let o = kdtrace(&[&args[..], &["--counters", "c.csv"]].concat());
     assert!(!o.status.success() && stderr(&o).contains("--two-level"), "{}", stderr(&o));

@@ -121,6 +121,7 @@ fn gpu_two_level_equals_its_cpu_twin() {
     let instances = place(&mut rng, 0.0);
     let mut scene = TwoLevelScene::new(geometries, &instances).unwrap();
     let mut tracer = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    assert_eq!(tracer.device_bytes(), scene.device_bytes());
     let aimed = |scene: &TwoLevelScene, instances: &[Instance], rng: &mut common::Rng| -> Vec<Ray> {
         let mut rays = Vec::new();
         for k in 0..600 {

@@ -16,6 +16,11 @@ pub struct StatsArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Also build the scene two-level (a glTF file's meshes once each, placed by
+    /// their nodes; `kdtrace::twolevel`) and report what it uploads
+    /// (`two_level_device_bytes`, geometries, instances).
+    #[arg(long)]
+    pub two_level: bool,
     /// Build this many times; report the fastest and the median build time.
     #[arg(long, default_value_t = 1)]
     pub repeat: u32,
@@ -84,6 +89,8 @@ struct Report<'a> {
     times: &'a [f64],
     /// What a tracer uploads for the scene (`kdtrace::trace::scene_device_bytes`).
     device_bytes: u64,
+    /// With `--two-level`: (device bytes, geometries, instances) of the two-level scene.
+    two_level: Option<(u64, usize, usize)>,
 }
 
 /// `kdtrace stats`: builds the tree `--repeat` times and prints the statistics of the last.
@@ -109,8 +116,22 @@ pub fn stats(args: StatsArgs) -> Result<()> {
     let tree = tree.expect("built at least once");
     times.sort_by(f64::total_cmp);
     let device_bytes = kdtrace::trace::scene_device_bytes(&tree);
-    let report =
-        Report { args: &args, scene: &scene, config: &config, stats: &tree.stats, times: &times, device_bytes };
+    let two_level = match args.two_level {
+        true => {
+            let (two, _) = pool.install(|| Scene::load_two_level(&args.scene, &config))?;
+            Some((two.device_bytes(), two.geometries().len(), two.instance_count()))
+        }
+        false => None,
+    };
+    let report = Report {
+        args: &args,
+        scene: &scene,
+        config: &config,
+        stats: &tree.stats,
+        times: &times,
+        device_bytes,
+        two_level,
+    };
     if args.json {
         println!("{}", report.json());
     } else {
@@ -151,6 +172,11 @@ impl Report<'_> {
         o.field("node_bytes", s.node_bytes);
         o.field("index_bytes", s.index_bytes);
         o.field("device_bytes", self.device_bytes);
+        if let Some((bytes, geometries, instances)) = self.two_level {
+            o.field("two_level_device_bytes", bytes);
+            o.field("two_level_geometries", geometries);
+            o.field("two_level_instances", instances);
+        }
         o.field("peak_scratch_bytes", s.peak_scratch_bytes);
         o.field("traversal_cost", config.traversal_cost);
         o.field("intersection_cost", config.intersection_cost);
@@ -209,6 +235,13 @@ impl Report<'_> {
             mib(self.device_bytes as usize),
             self.device_bytes as f64 / self.scene.triangles.len().max(1) as f64
         );
+        if let Some((bytes, geometries, instances)) = self.two_level {
+            println!(
+                "two-level copy      {bytes} B ({:.1} MiB, {:.1} B per placed triangle): {geometries} geometries, {instances} instances",
+                mib(bytes as usize),
+                bytes as f64 / self.scene.triangles.len().max(1) as f64
+            );
+        }
     }
 }
 
