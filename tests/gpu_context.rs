@@ -25,6 +25,9 @@ fn public_types_are_send_and_sync() {
     send_sync::<BufferSet>();
     send_sync::<Kernel>();
     send_sync::<Timestamps>();
+    send_sync::<kdtrace::twolevel::TwoLevelScene>();
+    send_sync::<kdtrace::twolevel::TwoLevelTracer>();
+    send_sync::<kdtrace::twolevel::TwoLevelBinding>();
 }
 
 #[test]
