@@ -138,7 +138,9 @@ impl TwoLevelTracer {
     /// Written in place while they fit the buffers (bindings made before stay
     /// valid); more instances than ever before reallocate them, and bindings made
     /// before are then refused. Submits and waits: no trace of this tracer may be
-    /// pending.
+    /// pending. When the scene comes to hold exactly one instance, the pipelines
+    /// without a top-level loop are compiled here for the traversals compiled so
+    /// far (once each).
     pub fn set_instances(&mut self, scene: &TwoLevelScene) -> Result<()> {
         let records = self.records(scene)?;
         if records.instances.len() > self.capacity {
@@ -170,7 +172,8 @@ impl TwoLevelTracer {
     /// buffer (and, when more instances than ever before reallocate the buffers,
     /// the old ones) is kept under `frame` until [`TwoLevelTracer::release_retired`]
     /// says that frame has completed; bindings made before a reallocation are then
-    /// refused.
+    /// refused. Like [`TwoLevelTracer::set_instances`] it may compile the
+    /// one-instance pipelines (a stall of a few seconds on lavapipe, once).
     ///
     /// # Safety
     /// `cmd` is recording, outside a render pass, on the queue family the traces
