@@ -6,22 +6,22 @@
 //! of instances with 3×4 transforms: scaled non-uniformly, rotated, mirrored, one
 //! moving from frame to frame.
 //!
-//! Per frame:
+//! Once, the meshes become kdtrace geometries read straight from the engine's
+//! vertex bytes (offset, stride) and indices, each with its own kd-tree
+//! ([`BottomLevel::from_geometry`]), and the scene graph their instances
+//! ([`TwoLevelScene`], [`TwoLevelTracer`]). Per frame:
 //!
-//! 1. kdtrace gets the instances as [`Geometry`]s read straight from the engine's
-//!    vertex bytes (offset, stride) and indices, with the engine's geometry and
-//!    instance ids; [`Scene::from_geometries`] flattens them into one scene, its
-//!    kd-tree is built (today a moving instance rebuilds the whole tree, timed
-//!    below);
-//! 2. one command buffer: after the first frame, the new scene's upload
-//!    ([`Tracer::record_replace_scene`]: recorded, no submit of kdtrace's own;
-//!    the old scene is released once the frame has completed), the engine's ray generation shader
-//!    (`glsl/examples/raygen.comp`), kdtrace's trace ([`Tracer::record_trace`]),
-//!    the engine's shading (`glsl/examples/engine_shade.comp`), which locates each
-//!    hit's `prim_id` in kdtrace's geometry ranges (instance id, geometry id,
-//!    triangle within the mesh), reads that triangle's three vertex normals
-//!    through the engine's own index and vertex buffers, interpolates them with
-//!    the hit's `u, v` and shades with the instance's colour; barriers between;
+//! 1. the scene graph's transforms go to kdtrace as [`Instance`](kdtrace::twolevel::Instance)s
+//!    with the engine's ids: the top level alone is rebuilt (timed below);
+//! 2. one command buffer: after the first frame, the instances' upload
+//!    ([`TwoLevelTracer::record_set_instances`]: recorded, no submit of kdtrace's
+//!    own; its staging buffer released once the frame has completed), the engine's
+//!    ray generation shader (`glsl/examples/raygen.comp`), kdtrace's two-level
+//!    trace ([`TwoLevelTracer::record_binding`]), the engine's shading
+//!    (`glsl/examples/engine_shade.comp`), which takes each hit's instance id,
+//!    geometry id and triangle within the mesh, reads that triangle's three vertex
+//!    normals through the engine's own index and vertex buffers, interpolates them
+//!    with the hit's `u, v` and shades with the instance's colour; barriers between;
 //! 3. submit, wait, write `frame-N.png`.
 //!
 //! ```sh
@@ -46,10 +46,11 @@ use embed::{align_up, compute_barrier, memory_barrier, Engine, Resources};
 use glam::{Affine3A, Mat3, Quat, Vec3};
 use gpu_allocator::MemoryLocation;
 use kdtrace::gpu::{shaders, BufferRange, Validation};
-use kdtrace::kdtree::{BuildConfig, KdTree};
-use kdtrace::scene::{Camera, Geometry, Indices, Scene};
-use kdtrace::trace::{TraceOptions, Tracer};
-use kdtrace::{Hit, Ray};
+use kdtrace::kdtree::BuildConfig;
+use kdtrace::scene::{Camera, Geometry, Indices};
+use kdtrace::traversal::{Traversal, Variant};
+use kdtrace::twolevel::{BottomLevel, GpuInstanceHit, InstanceHit, TwoLevelScene, TwoLevelTracer};
+use kdtrace::Ray;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -61,8 +62,8 @@ fn main() -> Result<()> {
     let report = run(Some(&out_dir), width, height, frames, Validation::IfAvailable)?;
     for (i, frame) in report.frames.iter().enumerate() {
         eprintln!(
-            "frame {i}: {} triangles in {} instances; flatten + build {:.1} ms, upload {:.1} ms, frame {:.1} ms",
-            frame.scene.triangles.len(),
+            "frame {i}: {} triangles in {} instances; top level {:.2} ms, upload {:.2} ms, frame {:.1} ms",
+            frame.triangles,
             frame.instances.len(),
             frame.build_ms,
             frame.upload_ms,
@@ -222,15 +223,16 @@ pub struct Frame {
     /// The engine's camera rays, as its raygen shader wrote them.
     pub rays: Vec<Ray>,
     /// kdtrace's hits of those rays.
-    pub hits: Vec<Hit>,
-    /// The flattened scene kdtrace traced (its geometry ranges locate the hits).
-    pub scene: Scene,
+    pub hits: Vec<InstanceHit>,
+    /// Triangles placed by the scene graph (each mesh's times its instances).
+    pub triangles: usize,
     /// The scene graph of the frame.
     pub instances: Vec<Instance>,
-    /// Flattening the instances and building the kd-tree (CPU).
+    /// The meshes' trees and the top level (the first frame), or rebuilding the
+    /// top level alone (CPU).
     pub build_ms: f64,
-    /// `Tracer::new` (the first frame), or recording the upload with
-    /// `record_replace_scene` (its copies run in the frame's command buffer).
+    /// `TwoLevelTracer::new` (the first frame), or recording the instances' upload
+    /// with `record_set_instances` (its copies run in the frame's command buffer).
     pub upload_ms: f64,
     /// Recording, submitting and waiting for the frame's command buffer.
     pub frame_ms: f64,
@@ -280,7 +282,7 @@ fn render_frames(
     count: u32,
 ) -> Result<(String, Vec<Frame>)> {
     let ctx = engine.kdtrace_context()?;
-    let options = TraceOptions::default();
+    let traversal = Traversal::closest(Variant::Stack);
     let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
 
     // What lives as long as the engine: the meshes and the pipelines.
@@ -308,32 +310,47 @@ fn render_frames(
     )?;
 
     let camera = camera();
-    let mut tracer: Option<Tracer> = None;
+    let mut kd: Option<(TwoLevelScene, TwoLevelTracer)> = None;
     let mut frames = Vec::new();
     for frame_index in 0..count {
-        // 1. The scene graph to kdtrace: one geometry per instance, read from the
-        // engine's vertex and index buffers, with the engine's ids.
+        // 1. The scene graph to kdtrace: the meshes once (their trees, the first
+        // frame), the instances with the engine's ids every frame.
         let start = Instant::now();
         let graph = instances(frame_index);
-        let geometries = graph
+        let placements: Vec<kdtrace::twolevel::Instance> = graph
             .iter()
             .enumerate()
-            .map(|(id, inst)| {
-                Ok(meshes.geometry(inst.mesh)?.with_transform(inst.transform).with_instance_id(id as u32))
+            .map(|(id, inst)| kdtrace::twolevel::Instance {
+                geometry: inst.mesh as usize,
+                transform: inst.transform,
+                instance_id: id as u32,
+                mask: 0xff,
             })
-            .collect::<Result<Vec<_>>>()?;
-        let scene = Scene::from_geometries(&geometries, Vec::new())?;
-        let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
-        let build_ms = start.elapsed().as_secs_f64() * 1e3;
-        let start = Instant::now();
-        let first = tracer.is_none();
-        if first {
-            let mut t = Tracer::new(&ctx, &tree, &scene.triangles)?;
-            t.prepare(&options)?;
-            tracer = Some(t);
-        }
-        let tracer = tracer.as_mut().expect("made above");
-        let mut upload_ms = start.elapsed().as_secs_f64() * 1e3;
+            .collect();
+        let first = kd.is_none();
+        let mut upload_ms = 0.0;
+        let (scene, tracer) = match &mut kd {
+            Some((scene, tracer)) => {
+                scene.set_instances(&placements)?;
+                (scene, tracer)
+            }
+            None => {
+                let config = BuildConfig::default();
+                let bottoms = [SPHERE, GROUND]
+                    .iter()
+                    .map(|&m| Ok(BottomLevel::from_geometry(&meshes.geometry(m)?, &config)?))
+                    .collect::<Result<Vec<_>>>()?;
+                let scene = TwoLevelScene::new(bottoms, &placements)?;
+                let upload = Instant::now();
+                let mut tracer = TwoLevelTracer::new(&ctx, &scene)?;
+                tracer.prepare(traversal)?;
+                upload_ms = upload.elapsed().as_secs_f64() * 1e3;
+                let (scene, tracer) = kd.insert((scene, tracer));
+                (&mut *scene, tracer)
+            }
+        };
+        let build_ms = start.elapsed().as_secs_f64() * 1e3 - upload_ms;
+        let triangles: usize = placements.iter().map(|p| scene.geometries()[p.geometry].triangles.len()).sum();
 
         // 2. The frame's buffers: rays and hits in one buffer (read back at the
         // end), the geometry ranges and instances of this frame, the pixels.
@@ -341,7 +358,7 @@ fn render_frames(
         let mut res = Resources::new(engine);
         let pixel_count = width * height;
         let ray_bytes = u64::from(pixel_count) * std::mem::size_of::<Ray>() as u64;
-        let hit_bytes = u64::from(pixel_count) * std::mem::size_of::<Hit>() as u64;
+        let hit_bytes = u64::from(pixel_count) * std::mem::size_of::<GpuInstanceHit>() as u64;
         let hit_offset = align_up(ray_bytes, ctx.info.min_storage_buffer_offset_alignment);
         let traced_bytes = hit_offset + hit_bytes;
         let traced = res.buffer(
@@ -354,8 +371,6 @@ fn render_frames(
             res.buffer(traced_bytes, vk::BufferUsageFlags::TRANSFER_DST, MemoryLocation::GpuToCpu, "readback")?;
         let rays = BufferRange::new(traced, 0, ray_bytes);
         let hits = BufferRange::new(traced, hit_offset, hit_bytes);
-        let ranges: Vec<[u32; 4]> =
-            scene.geometries.iter().map(|r| [r.first_prim, r.count, r.geometry_id, r.instance_id]).collect();
         let instance_data: Vec<EngineInstance> = graph
             .iter()
             .map(|inst| {
@@ -374,7 +389,6 @@ fn render_frames(
             res.write(buffer, bytes)?;
             Ok(BufferRange::new(buffer, 0, bytes.len() as u64))
         };
-        let range_table = per_frame(bytemuck::cast_slice(&ranges), "geometry ranges")?;
         let instance_table = per_frame(bytemuck::cast_slice(&instance_data), "instances")?;
         let pixel_bytes = u64::from(pixel_count) * 4;
         let pixel_buf = res.buffer(pixel_bytes, storage, MemoryLocation::GpuToCpu, "pixels")?;
@@ -386,7 +400,6 @@ fn render_frames(
             &[
                 (ENGINE_SCENE_BINDING_RAYS, rays),
                 (ENGINE_SCENE_BINDING_HITS, hits),
-                (ENGINE_SCENE_BINDING_RANGES, range_table),
                 (ENGINE_SCENE_BINDING_INSTANCES, instance_table),
                 (ENGINE_SCENE_BINDING_MESHES, mesh_table),
                 (ENGINE_SCENE_BINDING_VERTICES, vertices),
@@ -399,19 +412,21 @@ fn render_frames(
         let device = &engine.device;
         let cmd = res.command_buffer()?;
         let camera_params = CameraParams::new(&camera, width, height);
-        let shade_params = EngineShadeParams { count: pixel_count, range_count: ranges.len() as u32 };
+        let shade_params = EngineShadeParams { count: pixel_count, pad: 0 };
         let groups = pixel_count.div_ceil(ENGINE_WORKGROUP);
         let compute = vk::PipelineBindPoint::COMPUTE;
+        // SAFETY: both ranges lie in `traced`, which lives in `res` past the wait.
+        let binding = unsafe { tracer.bind(rays, hits, traversal)? };
         // SAFETY: `cmd` is a fresh primary command buffer of the engine's device;
-        // every object recorded lives in `res`, `statics` or `tracer` until the
-        // wait below has returned.
-        let binding = unsafe {
+        // every object recorded lives in `res`, `statics`, `binding` or `tracer`
+        // until the wait below has returned.
+        unsafe {
             device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).context("vkBeginCommandBuffer")?;
             if !first {
-                // This frame's scene: its upload recorded here, the old scene kept
-                // until this frame has completed (released after the wait below).
+                // This frame's instances: their upload recorded here, its staging
+                // buffer kept until this frame has completed (released after the wait).
                 let start = Instant::now();
-                tracer.record_replace_scene(cmd, &tree, &scene.triangles, u64::from(frame_index))?;
+                tracer.record_set_instances(cmd, scene, u64::from(frame_index))?;
                 upload_ms = start.elapsed().as_secs_f64() * 1e3;
             }
             device.cmd_bind_pipeline(cmd, compute, raygen.pipeline);
@@ -420,7 +435,7 @@ fn render_frames(
             device.cmd_push_constants(cmd, raygen.layout, stages, 0, bytemuck::bytes_of(&camera_params));
             device.cmd_dispatch(cmd, groups, 1, 1);
             compute_barrier(device, cmd, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
-            let binding = tracer.record_trace(cmd, rays, hits, pixel_count, &options)?;
+            tracer.record_binding(cmd, &binding, pixel_count, 0xff)?;
             compute_barrier(device, cmd, vk::AccessFlags::SHADER_READ);
             device.cmd_bind_pipeline(cmd, compute, shade.pipeline);
             device.cmd_bind_descriptor_sets(cmd, compute, shade.layout, 0, &[shade_set], &[]);
@@ -443,8 +458,7 @@ fn render_frames(
                 (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
             );
             device.end_command_buffer(cmd).context("vkEndCommandBuffer")?;
-            binding
-        };
+        }
         engine.submit_and_wait(cmd)?;
         drop(binding);
         tracer.release_retired(u64::from(frame_index));
@@ -457,12 +471,14 @@ fn render_frames(
         });
         let traced_data = res.read(readback)?;
         let rays: Vec<Ray> = bytemuck::pod_collect_to_vec(&traced_data[..ray_bytes as usize]);
-        let hits: Vec<Hit> = bytemuck::pod_collect_to_vec(&traced_data[hit_offset as usize..traced_bytes as usize]);
-        frames.push(Frame { image, rays, hits, scene, instances: graph, build_ms, upload_ms, frame_ms });
+        let words: Vec<GpuInstanceHit> =
+            bytemuck::pod_collect_to_vec(&traced_data[hit_offset as usize..traced_bytes as usize]);
+        let hits = words.iter().map(InstanceHit::from).collect();
+        frames.push(Frame { image, rays, hits, triangles, instances: graph, build_ms, upload_ms, frame_ms });
     }
     // kdtrace's objects go before the engine's; the engine's device outlives them.
     let device = ctx.info.name.clone();
-    drop(tracer);
+    drop(kd);
     drop(ctx);
     drop(statics);
     Ok((device, frames))

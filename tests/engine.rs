@@ -2,11 +2,12 @@
 //! allocator; an interleaved vertex buffer with u32 and u16 index buffers;
 //! instances scaled, rotated, mirrored and one moving), run under the validation
 //! layer with synchronization validation: no message, and every pixel of every
-//! frame equals this file's own CPU shading of the same hits — located with
-//! `Scene::locate`, normals read from the engine's unpacked index arrays and
-//! interpolated with the hit's `u, v` — so the GPU shader's binary search over
-//! the geometry ranges, its u16 unpacking, the vertex stride and the barycentric
-//! convention are all checked.
+//! frame equals this file's own CPU shading of the same two-level hits — their
+//! instance id, geometry id and triangle, normals read from the engine's unpacked
+//! index arrays and interpolated with the hit's `u, v` — so the GPU shader's
+//! reading of `GpuInstanceHit`, its u16 unpacking, the vertex stride and the
+//! barycentric convention are all checked; the instances move by recorded
+//! updates of the top level (`record_set_instances`).
 
 mod common;
 
@@ -30,14 +31,13 @@ fn cpu_shade(meshes: &engine::Meshes, frame: &engine::Frame, width: u32, height:
     image::RgbImage::from_fn(width, height, |x, y| {
         let i = (y * width + x) as usize;
         let (ray, hit) = (frame.rays[i], frame.hits[i]);
-        let color = match hit.prim_id {
+        let color = match hit.prim_index {
             PRIM_INCOMPLETE => Vec3::new(1.0, 0.0, 1.0),
             PRIM_MISS | PRIM_INVALID => Vec3::splat(0.05),
-            prim => {
-                let at = frame.scene.locate(prim).expect("a hit's prim_id is in the scene");
-                let mesh = meshes.meshes[at.geometry_id as usize];
-                let t = at.prim_index as usize;
-                let index = |k: usize| match at.geometry_id {
+            t => {
+                let mesh = meshes.meshes[hit.geometry_id as usize];
+                let t = t as usize;
+                let index = |k: usize| match hit.geometry_id {
                     engine::SPHERE => meshes.sphere_indices[3 * t + k] as usize,
                     _ => usize::from(meshes.ground_indices[3 * t + k]),
                 };
@@ -46,7 +46,8 @@ fn cpu_shade(meshes: &engine::Meshes, frame: &engine::Frame, width: u32, height:
                     Vec3::new(v[3], v[4], v[5])
                 };
                 let n = (1.0 - hit.u - hit.v) * normal(0) + hit.u * normal(1) + hit.v * normal(2);
-                let inst = frame.instances[at.instance_id as usize];
+                let inst = frame.instances[hit.instance_id as usize];
+                assert_eq!(hit.geometry_id, inst.mesh, "the hit names its instance's mesh");
                 let world = inst.normal_matrix() * n;
                 let cos = world.normalize().dot(Vec3::from(ray.dir).normalize()).abs();
                 inst.color * (0.15 + 0.85 * cos)
@@ -84,15 +85,15 @@ fn engine_example_shades_instances_by_id_with_smooth_normals() {
         let mut pixels = vec![0usize; frame.instances.len()];
         let mut sum_x = 0.0;
         for (i, hit) in frame.hits.iter().enumerate() {
-            if let Some(at) = frame.scene.locate(hit.prim_id) {
-                pixels[at.instance_id as usize] += 1;
-                if at.instance_id == engine::MOVING {
+            if hit.is_hit() {
+                pixels[hit.instance_id as usize] += 1;
+                if hit.instance_id == engine::MOVING {
                     sum_x += (i as u32 % width) as f64;
                 }
             }
         }
         assert!(pixels.iter().all(|&n| n > 20), "frame {f}: every instance is in view: {pixels:?}");
-        assert_eq!(frame.hits.iter().filter(|h| h.prim_id == PRIM_INCOMPLETE).count(), 0);
+        assert_eq!(frame.hits.iter().filter(|h| h.prim_index == PRIM_INCOMPLETE).count(), 0);
         moving_x.push(sum_x / pixels[engine::MOVING as usize] as f64);
     }
     assert!(

@@ -31,23 +31,21 @@ pub const ENGINE_SHADE_BINDINGS: u32 = 4;
 // Descriptor bindings of `engine_shade.comp` (set 0; examples/engine.rs).
 /// The rays traced (kdtrace `Ray`s).
 pub const ENGINE_SCENE_BINDING_RAYS: u32 = 0;
-/// Their hits (kdtrace `Hit`s).
+/// Their hits (kdtrace's two-level `GpuInstanceHit`s: 32 bytes, with the
+/// instance id, geometry id and triangle within the geometry).
 pub const ENGINE_SCENE_BINDING_HITS: u32 = 1;
-/// kdtrace's geometry ranges (`Scene::geometries`, one `uvec4` each: first
-/// prim, triangle count, geometry id, instance id), in prim order.
-pub const ENGINE_SCENE_BINDING_RANGES: u32 = 2;
 /// The engine's instances (`EngineInstance`), indexed by instance id.
-pub const ENGINE_SCENE_BINDING_INSTANCES: u32 = 3;
+pub const ENGINE_SCENE_BINDING_INSTANCES: u32 = 2;
 /// The engine's meshes (`EngineMesh`), indexed by geometry id.
-pub const ENGINE_SCENE_BINDING_MESHES: u32 = 4;
+pub const ENGINE_SCENE_BINDING_MESHES: u32 = 3;
 /// The interleaved vertices of every mesh (position xyz, normal xyz: 24 bytes).
-pub const ENGINE_SCENE_BINDING_VERTICES: u32 = 5;
+pub const ENGINE_SCENE_BINDING_VERTICES: u32 = 4;
 /// The index buffer of every mesh, as 32-bit words (u16 indices two to a word).
-pub const ENGINE_SCENE_BINDING_INDICES: u32 = 6;
+pub const ENGINE_SCENE_BINDING_INDICES: u32 = 5;
 /// The RGBA8 pixels written.
-pub const ENGINE_SCENE_BINDING_PIXELS: u32 = 7;
+pub const ENGINE_SCENE_BINDING_PIXELS: u32 = 6;
 /// Number of bindings of `engine_shade.comp`.
-pub const ENGINE_SCENE_BINDINGS: u32 = 8;
+pub const ENGINE_SCENE_BINDINGS: u32 = 7;
 
 // Descriptor bindings of `layout_probe.comp` (tests/layout.rs).
 /// Element 1 of a `ShadeParams` buffer.
@@ -112,8 +110,8 @@ gpu_struct! {
     pub struct EngineShadeParams {
         /// Pixels shaded.
         pub count: u32,
-        /// Entries of the geometry-range buffer.
-        pub range_count: u32,
+        /// Padding (0).
+        pub pad: u32,
     }
 }
 
@@ -159,7 +157,6 @@ pub const EXAMPLE_SHADER_DEFINES: &[(&str, u32)] = &[
     ("ENGINE_SHADE_BINDING_PIXELS", ENGINE_SHADE_BINDING_PIXELS),
     ("ENGINE_SCENE_BINDING_RAYS", ENGINE_SCENE_BINDING_RAYS),
     ("ENGINE_SCENE_BINDING_HITS", ENGINE_SCENE_BINDING_HITS),
-    ("ENGINE_SCENE_BINDING_RANGES", ENGINE_SCENE_BINDING_RANGES),
     ("ENGINE_SCENE_BINDING_INSTANCES", ENGINE_SCENE_BINDING_INSTANCES),
     ("ENGINE_SCENE_BINDING_MESHES", ENGINE_SCENE_BINDING_MESHES),
     ("ENGINE_SCENE_BINDING_VERTICES", ENGINE_SCENE_BINDING_VERTICES),

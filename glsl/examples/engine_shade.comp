@@ -1,8 +1,7 @@
 #version 450
-// examples/engine.rs: the engine's shading of kdtrace's hits on a scene of
-// instances. Each hit's prim_id is located in kdtrace's geometry ranges (scene
-// order: instance by instance, each in its mesh's triangle order), giving the
-// instance id, the geometry id and the triangle within the mesh; the engine's
+// examples/engine.rs: the engine's shading of kdtrace's two-level hits on a
+// scene of instances. Each hit names the instance id, the geometry id and the
+// triangle within the mesh (GpuInstanceHit); the engine's
 // own index and interleaved vertex buffers then give the triangle's vertex
 // normals, interpolated with the hit's (u, v) and carried to world space by the
 // instance's normal matrix. A light at the eye on the instance's colour; sRGB
@@ -17,8 +16,7 @@
 layout(local_size_x = ENGINE_WORKGROUP) in;
 
 layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
-layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_HITS) readonly buffer Hits { Hit hits[]; };
-layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_RANGES) readonly buffer Ranges { uvec4 ranges[]; };
+layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_HITS) readonly buffer Hits { GpuInstanceHit hits[]; };
 layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_INSTANCES) readonly buffer Instances { EngineInstance instances[]; };
 layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_MESHES) readonly buffer Meshes { EngineMesh meshes[]; };
 layout(std430, set = 0, binding = ENGINE_SCENE_BINDING_VERTICES) readonly buffer Vertices { float vertices[]; };
@@ -30,16 +28,6 @@ layout(push_constant) uniform Push { EngineShadeParams params; };
 float srgb(float c) {
     c = clamp(c, 0.0, 1.0);
     return c <= 0.0031308 ? 12.92 * c : 1.055 * pow(c, 1.0 / 2.4) - 0.055;
-}
-
-// The range holding prim_id: the last whose first prim is <= prim_id (binary search).
-uvec4 locate(uint prim_id) {
-    uint lo = 0u, hi = params.range_count;
-    while (hi - lo > 1u) {
-        uint mid = (lo + hi) / 2u;
-        if (ranges[mid].x <= prim_id) lo = mid; else hi = mid;
-    }
-    return ranges[lo];
 }
 
 // Index k (0, 1, 2) of triangle t of mesh m.
@@ -60,17 +48,16 @@ vec3 vertex_normal(EngineMesh m, uint index) {
 void main() {
     uint index = gl_GlobalInvocationID.x;
     if (index >= params.count) return;
-    Hit hit = hits[index];
+    GpuInstanceHit hit = hits[index];
     vec3 color;
-    if (hit.prim_id == PRIM_INCOMPLETE) {
+    if (hit.prim_index == PRIM_INCOMPLETE) {
         color = vec3(1.0, 0.0, 1.0);  // traversal cut short: never passes as a miss
-    } else if (hit.prim_id == PRIM_MISS || hit.prim_id == PRIM_INVALID) {
+    } else if (hit.prim_index == PRIM_MISS || hit.prim_index == PRIM_INVALID) {
         color = vec3(0.05);
     } else {
-        uvec4 range = locate(hit.prim_id);  // first prim, count, geometry id, instance id
-        uint triangle = hit.prim_id - range.x;
-        EngineMesh mesh = meshes[range.z];
-        EngineInstance inst = instances[range.w];
+        uint triangle = hit.prim_index;
+        EngineMesh mesh = meshes[hit.geometry_id];
+        EngineInstance inst = instances[hit.instance_id];
         vec3 n0 = vertex_normal(mesh, mesh_index(mesh, triangle, 0u));
         vec3 n1 = vertex_normal(mesh, mesh_index(mesh, triangle, 1u));
         vec3 n2 = vertex_normal(mesh, mesh_index(mesh, triangle, 2u));
