@@ -236,6 +236,38 @@ impl TwoLevelScene {
         Ok((TwoLevelScene::new(bottoms, &instances)?, ranges))
     }
 
+    /// Replaces geometry `index` by `geometry` (its tree built by the caller, e.g.
+    /// with [`BottomLevel::new`]): every other tree is kept; the instances are
+    /// placed again over the new box and the top level rebuilt. Upload with
+    /// [`TwoLevelTracer::set_geometries`]. On error the scene is unchanged.
+    ///
+    /// Errors: an index past the geometries, a tree that does not fit its
+    /// triangles, and those of [`TwoLevelScene::set_instances`].
+    pub fn set_geometry(&mut self, index: usize, geometry: BottomLevel) -> Result<()> {
+        if index >= self.geometries.len() {
+            return Err(Error::InvalidInput(format!(
+                "geometry index {index} is past the scene's {} geometries",
+                self.geometries.len()
+            )));
+        }
+        geometry.tree.check(geometry.triangles.len()).map_err(|e| {
+            Error::InvalidInput(format!(
+                "geometry {index} (id {}): the kd-tree does not fit its triangles: {e}",
+                geometry.id
+            ))
+        })?;
+        let links = TreeLinks::new(&geometry.tree.nodes, geometry.tree.bounds);
+        let old = std::mem::replace(&mut self.geometries[index], geometry);
+        let old_links = std::mem::replace(&mut self.links[index], links);
+        let instances: Vec<Instance> = self.placed.iter().map(|p| p.instance).collect();
+        if let Err(e) = self.set_instances(&instances) {
+            self.geometries[index] = old;
+            self.links[index] = old_links;
+            return Err(e);
+        }
+        Ok(())
+    }
+
     /// Replaces the instances and rebuilds the top level only (the geometries'
     /// trees are kept). On error the scene is unchanged.
     pub fn set_instances(&mut self, instances: &[Instance]) -> Result<()> {

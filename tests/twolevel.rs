@@ -412,5 +412,42 @@ fn two_level_edge_cases_match_the_cpu_twin() {
             assert_eq!(hits > 0, sphere_visible, "{} instances, mask {mask}: {hits} hits", instances.len());
         }
     }
+    // One geometry changed: its tree alone rebuilt, the scene uploaded again, the
+    // old binding refused; the empty geometry (instance 0 at the origin) becomes
+    // a sphere that the rays now hit.
+    let hit_buf = kdtrace::gpu::Buffer::new(
+        &ctx,
+        (rays.len() * 64) as u64,
+        kdtrace::ash::vk::BufferUsageFlags::STORAGE_BUFFER,
+        kdtrace::gpu_allocator::MemoryLocation::GpuOnly,
+        "hits",
+    )
+    .unwrap();
+    let whole = kdtrace::gpu::BufferRange::whole(&hit_buf);
+    let (ray_range, hit_range) = (
+        kdtrace::gpu::BufferRange::new(whole.buffer, 0, 32 * 64),
+        kdtrace::gpu::BufferRange::new(whole.buffer, 32 * 64, 32 * 64),
+    );
+    let traversal = Traversal::closest(Variant::Stack);
+    // SAFETY: the buffer outlives the binding, which is never recorded.
+    let binding = unsafe { tracer.bind(ray_range, hit_range, traversal).unwrap() };
+    scene.set_instances(&[place(0, 0.0), place(1, 3.0)]).unwrap();
+    tracer.set_instances(&scene).unwrap();
+    let before: Vec<InstanceHit> = tracer.trace(&rays, 0xff, traversal).unwrap();
+    scene.set_geometry(0, BottomLevel::new(1, common::sphere(2, 0.0, 8), &config)).unwrap();
+    tracer.set_geometries(&scene).unwrap();
+    let gpu = tracer.trace(&rays, 0xff, traversal).unwrap();
+    let cpu: Vec<InstanceHit> = rays.iter().map(|r| scene.trace(r, 0xff, traversal)).collect();
+    assert_eq!(gpu, cpu);
+    let count = |hits: &[InstanceHit]| hits.iter().filter(|h| h.is_hit() && h.instance_id == 0).count();
+    assert!(count(&before) == 0 && count(&gpu) > 0, "the changed geometry is hit: {}", count(&gpu));
+    assert_eq!(tracer.device_bytes(), scene.device_bytes());
+    let e = scene.set_geometry(2, BottomLevel::new(1, Vec::new(), &config)).unwrap_err();
+    assert!(e.to_string().contains("past the scene's 2 geometries"), "{e}");
+    let mut recorded = Ok(());
+    // SAFETY: `cmd` is recording; a refused binding records nothing.
+    ctx.submit_and_wait(|cmd| recorded = unsafe { tracer.record_binding(cmd, &binding, 1, 0xff) }).unwrap();
+    assert!(recorded.unwrap_err().to_string().contains("bind again"));
+    drop(binding);
     common::assert_validation_clean(&ctx);
 }

@@ -344,6 +344,21 @@ impl TwoLevelTracer {
         Ok(Some((staging, copies)))
     }
 
+    /// Uploads `scene` again after [`TwoLevelScene::set_geometry`] (every
+    /// geometry's nodes and triangles, and the instances); the compiled pipelines
+    /// are kept. Submits and waits: no trace of this tracer may be pending;
+    /// bindings made before are refused (bind again), and buffers retired by
+    /// recorded updates stay until [`TwoLevelTracer::release_retired`].
+    pub fn set_geometries(&mut self, scene: &TwoLevelScene) -> Result<()> {
+        let mut fresh = TwoLevelTracer::new(&self.ctx, scene)?;
+        fresh.kernels = std::mem::take(&mut self.kernels);
+        fresh.retired = std::mem::take(&mut self.retired);
+        fresh.generation = self.generation + 1;
+        fresh.compile_one_instance()?;
+        *self = fresh;
+        Ok(())
+    }
+
     /// Bytes of the scene on the device: nodes, triangle texels, geometries,
     /// and the instance buffers (with their spare room).
     pub fn device_bytes(&self) -> u64 {
