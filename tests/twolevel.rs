@@ -2,7 +2,8 @@
 //! of dragon_200k and the bunny (rotated, non-uniformly scaled, mirrored,
 //! translated 1e6 away, two overlapping), rays aimed at edges and vertices from
 //! near and from 1e9 scene sizes away, judged against the exact reference on
-//! each instance's object ray. Under CI a missing scene fails.
+//! each instance's object ray, and the GPU kernel bit for bit with the CPU twin
+//! there. Under CI a missing scene fails.
 //!
 //! And the GPU's two-level kernel (`TwoLevelTracer`) against its CPU twin
 //! (`TwoLevelScene::trace`), bit for bit, on generated geometry.
@@ -57,8 +58,16 @@ fn instanced_big_scenes_are_exact_for_their_object_rays() {
             inst.transform.transform_point3(if k % 2 == 0 { v0 + (v1 - v0) * rng.range(0.0, 1.0) } else { v1 });
         let distance = if k % 3 == 0 { 1e9 } else { rng.range(0.2, 2.0) };
         let origin = target + rng.unit_vector() * size * distance;
-        rays.push(Ray::new(origin, target - origin, 0.0, f32::INFINITY));
+        // Huge finite segment ends too, and segments that start past the origin.
+        // (tmax = 3e38 is left out: 4 of its 20 near rays disagree here, 0 serious —
+        // an open finding of issue 29's review, see the stop note.)
+        let (tmin, tmax) = [(0.0, f32::INFINITY), (0.0, 1.0e30), (1e-3, 1e30)][k % 3];
+        rays.push(Ray::new(origin, target - origin, tmin, tmax));
     }
+    // The GPU kernel on the same scene and rays, bit for bit with the twin.
+    let ctx = common::context();
+    let mut tracer = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    assert_eq!(tracer.device_bytes(), scene.device_bytes());
     for (variant, any_hit) in [(Variant::Stack, false), (Variant::ShortStack, false), (Variant::Stack, true)] {
         let traversal = Traversal { any_hit, ..Traversal::closest(variant) };
         // (agrees, serious, hit) per ray; the exact reference in parallel.
@@ -67,9 +76,24 @@ fn instanced_big_scenes_are_exact_for_their_object_rays() {
             .map(|ray| {
                 let hit = scene.trace(ray, 0xff, traversal);
                 let v = if any_hit { scene.verdict_any(ray, &hit) } else { scene.verdict(ray, &hit) };
+                if !v.agrees() {
+                    eprintln!("{variant:?} any-hit {any_hit}: {} on {ray:?}: {hit:?}", v.name());
+                }
                 (v.agrees(), v.is_serious(), hit.is_hit())
             })
             .collect();
+        let gpu = tracer.trace(&rays, 0xff, traversal).unwrap();
+        for (i, ray) in rays.iter().enumerate() {
+            let cpu = scene.trace(ray, 0xff, traversal);
+            let bits = |h: &InstanceHit| (h.t.to_bits(), h.prim_index, h.u.to_bits(), h.v.to_bits(), h.instance_index);
+            assert_eq!(
+                bits(&gpu[i]),
+                bits(&cpu),
+                "{variant:?} any-hit {any_hit}, ray {i}: GPU {:?}, CPU {cpu:?}",
+                gpu[i]
+            );
+            assert_eq!(gpu[i].front_face, cpu.front_face);
+        }
         let count = |f: fn(&(bool, bool, bool)) -> bool| verdicts.iter().filter(|v| f(v)).count();
         let (agree, serious, hits) = (count(|v| v.0), count(|v| v.1), count(|v| v.2));
         eprintln!("{variant:?} any-hit {any_hit}: {agree}/{} agree, {hits} hits, {serious} serious", rays.len());
@@ -286,21 +310,7 @@ fn two_level_traces_record_into_an_engine_frame() {
         ctx.submit_and_wait(|cmd| {
             // SAFETY: `cmd` is recording; the binding and buffers outlive the wait.
             recorded = unsafe { tracer.record_binding(cmd, &binding, rays.len() as u32, 0xff) };
-            let barrier = [vk::MemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                .dst_access_mask(vk::AccessFlags::HOST_READ)];
-            // SAFETY: a barrier in a recording command buffer.
-            unsafe {
-                ctx.device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::PipelineStageFlags::HOST,
-                    vk::DependencyFlags::empty(),
-                    &barrier,
-                    &[],
-                    &[],
-                )
-            };
+            host_read_barrier(&ctx, cmd);
         })?;
         recorded?;
         let words: &[kdtrace::twolevel::GpuInstanceHit] = bytemuck::cast_slice(hit_buf.read(0, rays.len() * 32)?);
@@ -334,21 +344,7 @@ fn two_level_traces_record_into_an_engine_frame() {
                 .and_then(|_| tracer.record_set_instances(cmd, &scene, 1))
                 .and_then(|_| tracer.record_binding(cmd, &binding2, rays.len() as u32, 0xff))
         };
-        let barrier = [vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)];
-        // SAFETY: a barrier in a recording command buffer.
-        unsafe {
-            ctx.device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &barrier,
-                &[],
-                &[],
-            )
-        };
+        host_read_barrier(&ctx, cmd);
     })
     .unwrap();
     recorded.unwrap();
@@ -450,4 +446,15 @@ fn two_level_edge_cases_match_the_cpu_twin() {
     assert!(recorded.unwrap_err().to_string().contains("bind again"));
     drop(binding);
     common::assert_validation_clean(&ctx);
+}
+
+/// The engine's barrier from the trace's writes to the host's reads of the hits.
+fn host_read_barrier(ctx: &kdtrace::gpu::GpuContext, cmd: kdtrace::ash::vk::CommandBuffer) {
+    use kdtrace::ash::vk;
+    let barrier = [vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .dst_access_mask(vk::AccessFlags::HOST_READ)];
+    let (compute, host) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::HOST);
+    // SAFETY: a barrier in a command buffer the caller is recording.
+    unsafe { ctx.device.cmd_pipeline_barrier(cmd, compute, host, vk::DependencyFlags::empty(), &barrier, &[], &[]) };
 }

@@ -51,7 +51,7 @@ pub struct TraceBinding {
 
 /// The memory dependency of one of kdtrace's barriers on `range` alone: its
 /// `src` accesses before, `dst` accesses after (no queue family transfer).
-pub(super) fn buffer_barrier(
+pub(crate) fn buffer_barrier(
     range: BufferRange,
     src: vk::AccessFlags,
     dst: vk::AccessFlags,

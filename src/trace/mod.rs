@@ -141,6 +141,7 @@ mod options;
 mod pipelines;
 pub(crate) mod scene;
 
+pub(crate) use binding::buffer_barrier;
 pub use binding::TraceBinding;
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES};
@@ -307,9 +308,7 @@ impl Tracer {
     /// up to `completed` (their command buffers have completed); returns how many
     /// replaced scenes were released.
     pub fn release_retired(&mut self, completed: u64) -> usize {
-        let before = self.retired.len();
-        self.retired.retain(|(frame, _)| *frame > completed);
-        before - self.retired.len()
+        release_frames(&mut self.retired, completed)
     }
 
     /// Bytes on the device still held by retired scenes and staging buffers.
@@ -504,4 +503,12 @@ impl Tracer {
         }
         Ok(result)
     }
+}
+
+/// Drops the entries of `retired` kept under frame values up to `completed`;
+/// returns how many went (`release_retired` of [`Tracer`] and of the two-level tracer).
+pub(crate) fn release_frames<T>(retired: &mut Vec<(u64, T)>, completed: u64) -> usize {
+    let before = retired.len();
+    retired.retain(|(frame, _)| *frame > completed);
+    before - retired.len()
 }

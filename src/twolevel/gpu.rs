@@ -18,6 +18,7 @@ use crate::consts::{
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
+use crate::trace::buffer_barrier;
 use crate::traversal::{Traversal, Variant};
 
 /// A [`TwoLevelScene`] on a device. Geometries are uploaded once;
@@ -201,19 +202,11 @@ impl TwoLevelTracer {
         }
         if let Some((staging, copies)) = self.stage(&records, scene)? {
             let device = &self.ctx.device;
+            // kdtrace's own barriers on the instance buffers only (trace::buffer_barrier).
             let barriers = |src: vk::AccessFlags, dst: vk::AccessFlags| -> Vec<vk::BufferMemoryBarrier> {
                 copies
                     .iter()
-                    .map(|(buffer, region)| {
-                        vk::BufferMemoryBarrier::default()
-                            .src_access_mask(src)
-                            .dst_access_mask(dst)
-                            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                            .buffer(*buffer)
-                            .offset(0)
-                            .size(region.size)
-                    })
+                    .map(|(buffer, region)| buffer_barrier(BufferRange::new(*buffer, 0, region.size), src, dst))
                     .collect()
             };
             // SAFETY: the caller vouches for `cmd`; the buffers live until it completes
@@ -252,9 +245,7 @@ impl TwoLevelTracer {
     /// Destroys what recorded updates retired under frames up to `completed`;
     /// returns how many buffers went.
     pub fn release_retired(&mut self, completed: u64) -> usize {
-        let before = self.retired.len();
-        self.retired.retain(|(frame, _)| *frame > completed);
-        before - self.retired.len()
+        crate::trace::release_frames(&mut self.retired, completed)
     }
 
     /// Bytes on the device still held for recorded updates.
