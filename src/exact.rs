@@ -235,11 +235,18 @@ pub enum Exact {
 }
 
 fn frac_to_f64(f: &Frac) -> f64 {
-    // Keep 64 significant bits of the denominator so both convert without overflow.
-    let shift = f.den.bits().saturating_sub(64) as usize;
-    let (num, den) = (&f.num >> shift, &f.den >> shift);
-    let to = |x: &BigInt| x.to_f64().unwrap_or(f64::NAN);
-    to(&num) / to(&den)
+    if f.num.is_zero() {
+        return 0.0;
+    }
+    // The quotient to 64 significant bits (or more) by integer division, then
+    // scaled: within 2^-63 relative before the final rounding to f64. (Cutting
+    // both to 64 bits instead lost the bits of the smaller one: t near 2^-20 came
+    // out 1e-14 off, beyond the tie tolerance of `closest_exact`.)
+    let s = 64 + f.den.bits() as i64 - f.num.bits() as i64;
+    let q = if s >= 0 { (&f.num << s as usize) / &f.den } else { &f.num / (&f.den << (-s) as usize) };
+    let half = (-s / 2).clamp(-1000, 1000) as i32;
+    let rest = (-s - half as i64).clamp(-1100, 1100) as i32;
+    q.to_f64().unwrap_or(f64::NAN) * 2f64.powi(half) * 2f64.powi(rest)
 }
 
 /// The exact closest hit of `ray` among `triangles` (brute force).
@@ -607,5 +614,21 @@ mod tests {
         let exact = closest_exact(&tris, &shadow);
         assert_eq!(judge_any(&tris, &shadow, &hit(0, 2.0), &exact), Verdict::Same);
         assert_eq!(judge_any(&tris, &shadow, &Hit::MISS, &exact), Verdict::MissedHit);
+    }
+
+    /// A long direction (t near 2^-20) through the shared diagonal: both
+    /// triangles tie at exactly t = 2^-20. (The f64 view of an exact `t` once
+    /// kept 64 bits of the denominator and fewer of the numerator, 1e-14 off,
+    /// and the tie set lost a triangle.)
+    #[test]
+    fn ties_survive_tiny_t() {
+        let tris = quad();
+        let scale = 2f32.powi(20);
+        let ray = Ray::new(Vec3::new(0.5, 0.5, 2.0), Vec3::new(0.0, 0.0, -2.0 * scale), 0.0, f32::INFINITY);
+        assert_eq!(closest_exact(&tris[..2], &ray), Exact::Hit { ties: vec![0, 1], t: 2f64.powi(-20) });
+        for (num, den) in [(1i64, 3i64), (-7, 1 << 40), (12345, 1 << 20)] {
+            let f = Frac { num: BigInt::from(num) << 300usize, den: BigInt::from(den) << 300usize };
+            assert_eq!(frac_to_f64(&f), num as f64 / den as f64);
+        }
     }
 }

@@ -126,27 +126,6 @@ impl Ff {
         self.hi > b || (self.hi == b && self.lo >= 0.0)
     }
 
-    /// `self / den >= b` (`den.hi != 0`), from the sign of `self - b·den`. Twin
-    /// of `ff_quotient_ge`.
-    pub fn quotient_ge(self, den: Ff, b: Ff) -> bool {
-        let diff = self.sub(den.mul(b));
-        if den.hi > 0.0 {
-            diff.hi >= 0.0
-        } else {
-            diff.hi <= 0.0
-        }
-    }
-
-    /// `self / den <= b`. Twin of `ff_quotient_le`.
-    pub fn quotient_le(self, den: Ff, b: Ff) -> bool {
-        let diff = self.sub(den.mul(b));
-        if den.hi > 0.0 {
-            diff.hi <= 0.0
-        } else {
-            diff.hi >= 0.0
-        }
-    }
-
     /// `self <= y`. Twin of `ff_le`.
     #[inline]
     pub fn le(self, y: Ff) -> bool {

@@ -207,6 +207,47 @@ pub(crate) fn ff_ldexp(x: Ff, k: i32) -> Ff {
     Ff { hi: ldexp2(x.hi, k), lo: ldexp2(x.lo, k) }
 }
 
+/// Which side of the bound `b·2^k` the quotient `num / den` lies on (`den.hi !=
+/// 0`): negative below, 0 on it, positive above, from the sign of `num - b·2^k·den`
+/// in float-float. `num` and `den` come from the exact test (`|num| < 2^8`,
+/// `|den| >= 2^-149`); the bound may be far outside f32's range there (a
+/// huge finite `tmax` on a small scene), so the comparison is scaled by a power
+/// of two that keeps every term in range (exact: the same answer as unscaled
+/// wherever that one neither overflows nor underflows), and where the bound
+/// exceeds every possible quotient its sign decides. Twin of `quotient_side` in
+/// triangle.glsl.
+pub(crate) fn quotient_side(num: Ff, den: Ff, b: Ff, k: i32) -> i32 {
+    let mut scale = 0;
+    if b.hi != 0.0 {
+        let s = k + exponent_of(b.hi);
+        if s > 160 {
+            // |num / den| < 2^8 / 2^-149 < |b|·2^k.
+            return if b.hi > 0.0 { -1 } else { 1 };
+        }
+        // The bound's term near 2^±100, num scaled alike.
+        scale = if s > 100 {
+            100 - s
+        } else if s < -100 {
+            (-100 - s).min(120)
+        } else {
+            0
+        };
+    }
+    let diff = ff_ldexp(num, scale).sub(den.mul(ff_ldexp(b, k + scale)));
+    let sign = if diff.hi > 0.0 {
+        1
+    } else if diff.hi < 0.0 {
+        -1
+    } else {
+        0
+    };
+    if den.hi > 0.0 {
+        sign
+    } else {
+        -sign
+    }
+}
+
 /// The answer of the f32 watertight test ([`WatertightRay::intersect_f32`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TriTest {
@@ -462,10 +503,9 @@ impl WatertightRay {
             return None;
         }
         // The ray's own bounds, on the signs of num - b·den (see triangle.glsl).
-        let bound = |b: f32| ff_ldexp(Ff::diff(b, self.t_shift), eq - es);
-        let above_min = if tmin.is_infinite() { tmin < 0.0 } else { num.quotient_ge(den, bound(tmin)) };
-        let below_max =
-            if self.ray_tmax.is_infinite() { self.ray_tmax > 0.0 } else { num.quotient_le(den, bound(self.ray_tmax)) };
+        let side = |b: f32| quotient_side(num, den, Ff::diff(b, self.t_shift), eq - es);
+        let above_min = if tmin.is_infinite() { tmin < 0.0 } else { side(tmin) >= 0 };
+        let below_max = if self.ray_tmax.is_infinite() { self.ray_tmax > 0.0 } else { side(self.ray_tmax) <= 0 };
         if !(above_min && below_max) {
             return None;
         }
@@ -491,5 +531,34 @@ impl WatertightRay {
         }
         let rcp_det = 1.0 / det.hi;
         Some((t.hi, (v.hi * rcp_det), (w.hi * rcp_det), t, err))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `quotient_side` against f64 on bounds inside and far outside f32's range
+    /// once scaled (a huge finite `tmax` over a long direction).
+    #[test]
+    fn quotient_side_survives_huge_bounds() {
+        let cases =
+            [(1.5f32, 1.0f32, 3e38f32, 0), (1.5, 1.0, 3e38, 60), (1.5, 1.0, 3e38, 200), (-1.5, 0.25, 3e38, 150)];
+        for (num, den, b, k) in cases {
+            let expect = (num as f64 / den as f64).total_cmp(&(b as f64 * 2f64.powi(k))) as i32;
+            let got = quotient_side(Ff::from_f32(num), Ff::from_f32(den), Ff::from_f32(b), k);
+            assert_eq!(got.signum(), expect, "{num} / {den} against {b}·2^{k}");
+        }
+        // Near the bound, scaled: the sign of num - b·2^k·den exactly.
+        let b = Ff::from_f32(1.0);
+        for k in [110, 140, -110, -120] {
+            // num / den = 2^k (the bound), then a little below it; |den| <= 1
+            // (the exact test's den stays below 2^8).
+            let (num, den) = if k > 0 { (1.0, ldexp2(1.0, -k)) } else { (ldexp2(1.0, k), 1.0) };
+            let on = quotient_side(Ff::from_f32(num), Ff::from_f32(den), b, k);
+            assert_eq!(on, 0, "on the bound at 2^{k}");
+            let larger_den = Ff { hi: den * (1.0 + 1.0 / 256.0), lo: 0.0 };
+            assert_eq!(quotient_side(Ff::from_f32(num), larger_den, b, k), -1, "below the bound at 2^{k}");
+        }
     }
 }

@@ -53,8 +53,9 @@ pub enum Category {
     FarOrigin1e3,
     /// Origins 1e7 scene diagonals away, aimed at points on triangles.
     FarOrigin1e7,
-    /// Huge finite `tmax` (1e30 or `f32::MAX`) toward points on triangles, from
-    /// points in the box or 1e5 diagonals away.
+    /// Huge finite `tmax` (1e30, 3e38 or `f32::MAX`) toward points on triangles,
+    /// vertices and edge midpoints, from points in the box or 1e5 diagonals
+    /// away, direction lengths 2^-20 … 2^40 times the distance to the target.
     HugeTmax,
     /// From 1e5 scene diagonals away toward points on triangles, nearly parallel
     /// to an axis plane: one direction component 1e-3 … 1e-30 of the others.
@@ -349,8 +350,21 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
                     0 => s.box_point(),
                     _ => bounds.center() + s.rng.unit_vector() * (1e5 * diagonal),
                 };
-                let tmax = if s.rng.next_u64() & 1 == 0 { 1e30 } else { f32::MAX };
-                Ray { tmax, ..toward(origin, s.surface_point()) }
+                // Aimed at edges and vertices too (the exact test decides those, with
+                // the bound scaled far beyond f32's range when the direction is long).
+                let target = match s.index(3) {
+                    0 => s.surface_point(),
+                    1 => s.vertex(),
+                    _ => {
+                        let [a, b, c] = s.triangle();
+                        let (p, q) = [(a, b), (b, c), (c, a)][s.index(3)];
+                        p + 0.5 * (q - p)
+                    }
+                };
+                let tmax = [1e30, 3e38, f32::MAX][s.index(3)];
+                let length = 2f32.powi(s.index(61) as i32 - 20);
+                let ray = toward(origin, target);
+                Ray { tmax, dir: (Vec3::from(ray.dir) * length).into(), ..ray }
             }
             Category::BoundedSegment => {
                 let target = s.surface_point();

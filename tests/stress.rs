@@ -457,7 +457,9 @@ fn closed_meshes_have_no_holes() {
 /// 63.5, far 1e7 11.5, huge tmax 87.5, far nearly axis-parallel 70.5, bounded
 /// segment 90.5; and (2026-12-04, seed 13 only) far 1e10–1e30 3.5 (`restart`
 /// packets of 4 on the teapot; single-ray `stack` 62 on the Cornell box), far
-/// axis-parallel 1e3–1e30 13.0.
+/// axis-parallel 1e3–1e30 13.0. Huge tmax since 2026-12-06 (its rays also aim at
+/// vertices and edges, direction lengths 2^-20 … 2^40): `kdtrace verify --plain`,
+/// 2,000 rays, two seeds, lowest 79.95 % (teapot; Cornell box 85.75 %), floor 65.
 fn plain_floor(category: Category) -> f64 {
     match category {
         Category::Random | Category::DirectionScale => 0.995,
@@ -470,7 +472,7 @@ fn plain_floor(category: Category) -> f64 {
         Category::ToEdge => 0.795,
         Category::AlongEdge => 0.8,
         Category::BoundedSegment => 0.805,
-        Category::HugeTmax => 0.775,
+        Category::HugeTmax => 0.65,
         Category::OnSurface => 0.73,
         Category::FarOrigin => 0.535,
         Category::FarGrazing => 0.605,

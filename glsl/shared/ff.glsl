@@ -120,16 +120,6 @@ vec2 ff_exact_sum8(float terms[8]) {
     return ff_two_sum(h[7], rest);
 }
 
-// num / den >= b and num / den <= b (den.x != 0), from the sign of num - b den.
-bool ff_quotient_ge(vec2 num, vec2 den, vec2 b) {
-    vec2 diff = ff_sub(num, ff_mul(den, b));
-    return den.x > 0.0 ? diff.x >= 0.0 : diff.x <= 0.0;
-}
-bool ff_quotient_le(vec2 num, vec2 den, vec2 b) {
-    vec2 diff = ff_sub(num, ff_mul(den, b));
-    return den.x > 0.0 ? diff.x <= 0.0 : diff.x >= 0.0;
-}
-
 // x >= b against an f32 (exact for normalized pairs).
 bool ff_ge_f(vec2 x, float b) {
     return x.x > b || (x.x == b && x.y >= 0.0);

@@ -92,6 +92,25 @@ float ldexp2(float x, int k) {
     return y;
 }
 
+// Which side of the bound b 2^k the quotient num / den lies on (den.x != 0):
+// negative below, 0 on it, positive above, from the sign of num - b 2^k den. The
+// exact test has |num| < 2^8 and |den| >= 2^-149; a huge finite bound (tmax =
+// 3e38 on a small scene) would overflow b 2^k, so both terms are scaled by a
+// power of two that keeps them in range (the same answer as unscaled wherever
+// that one is in range), and a bound beyond every possible quotient decides by
+// its sign.
+int quotient_side(vec2 num, vec2 den, vec2 b, int k) {
+    int scale = 0;
+    if (b.x != 0.0) {
+        int s = k + exponent_of(b.x);
+        if (s > 160) return b.x > 0.0 ? -1 : 1;
+        scale = s > 100 ? 100 - s : (s < -100 ? min(-100 - s, 120) : 0);
+    }
+    vec2 diff = ff_sub(ff_ldexp(num, scale), ff_mul(den, ff_ldexp(b, k + scale)));
+    int sign_ = diff.x > 0.0 ? 1 : (diff.x < 0.0 ? -1 : 0);
+    return den.x > 0.0 ? sign_ : -sign_;
+}
+
 // The sheared coordinate (v - o) dz - s (v_z - o_z) of a vertex (one of its 2D
 // coordinates in the watertight test, the direction scaled), from the offsets
 // v - o and v_z - o_z scaled by 2^-eo, exactly up to one rounding to float-float.
@@ -202,9 +221,9 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
     // The ray's own bounds: tmin <= t_shift + t <= ray_tmax, with t = (num / den)
     // 2^(es - eq), decided on the signs of num - b den (no rounded quotient: a hit
     // exactly at a bound, a ray leaving a surface, stays decided exactly).
-    bool above_min = isinf(tmin) ? tmin < 0.0 : ff_quotient_ge(num, den, ff_ldexp(ff_diff(tmin, r.t_shift), eq - es));
+    bool above_min = isinf(tmin) ? tmin < 0.0 : quotient_side(num, den, ff_diff(tmin, r.t_shift), eq - es) >= 0;
     bool below_max = isinf(r.ray_tmax) ? r.ray_tmax > 0.0
-                                       : ff_quotient_le(num, den, ff_ldexp(ff_diff(r.ray_tmax, r.t_shift), eq - es));
+                                       : quotient_side(num, den, ff_diff(r.ray_tmax, r.t_shift), eq - es) <= 0;
     if (!(above_min && below_max)) return false;
     // t along the unscaled direction: t' 2^(es - eq).
     vec2 t_scaled = ff_div(num, den);
