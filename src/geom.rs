@@ -168,6 +168,12 @@ pub struct WatertightRay {
 /// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
 pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
 
+/// An exact-test edge function within `ON_EDGE_GAMMA` times the magnitude of
+/// its two products counts as 0 (the ray through the edge): 2^-40, 16× the
+/// float-float error of the 2D coordinates (one rounding each) carried
+/// through the products. Twin of `ON_EDGE_GAMMA` in triangle.glsl.
+const ON_EDGE_GAMMA: f32 = 1.0 / 1_099_511_627_776.0;
+
 /// The exponent `e` of `x = m·2^e`, `m` in `[1, 2)` (0 for `x = 0`). Twin of
 /// `exponent_of` in triangle.glsl.
 #[inline]
@@ -480,6 +486,20 @@ impl WatertightRay {
         let u = cx.mul(by).sub(cy.mul(bx));
         let v = ax.mul(cy).sub(ay.mul(cx));
         let w = bx.mul(ay).sub(by.mul(ax));
+        // Within the coordinates' rounding of 0 (the ray through the edge: at a fold,
+        // a box corner or a mesh's border, rounding could put it outside both
+        // triangles): on the edge, a hit. See triangle.glsl.
+        let on_edge = |e: Ff, p: Ff, q: Ff, r: Ff, s: Ff| {
+            let m = (p.hi * q.hi).abs() + (r.hi * s.hi).abs();
+            if e.hi.abs() <= m * ON_EDGE_GAMMA {
+                Ff { hi: 0.0, lo: 0.0 }
+            } else {
+                e
+            }
+        };
+        let u = on_edge(u, cx, by, cy, bx);
+        let v = on_edge(v, ax, cy, ay, cx);
+        let w = on_edge(w, bx, ay, by, ax);
         if (u.hi < 0.0 || v.hi < 0.0 || w.hi < 0.0) && (u.hi > 0.0 || v.hi > 0.0 || w.hi > 0.0) {
             return None;
         }
@@ -502,8 +522,17 @@ impl WatertightRay {
         if den.hi == 0.0 {
             return None;
         }
-        // The ray's own bounds, on the signs of num - b·den (see triangle.glsl).
-        let side = |b: f32| quotient_side(num, den, Ff::diff(b, self.t_shift), eq - es);
+        // The ray's own bounds, on the signs of num - b·den (see triangle.glsl); a
+        // shifted ray's from its own origin.
+        let (bound_num, bound_k) = if self.t_shift == 0.0 {
+            (num, eq - es)
+        } else {
+            let own = [0, 1, 2].map(|i| Ff::diff(v0[i], self.origin[i]));
+            let eo = exponent_of(own[0].hi.abs().max(own[1].hi.abs()).max(own[2].hi.abs()));
+            let own = own.map(|x| ff_ldexp(x, -eo));
+            (own[0].mul(n[0]).add(own[1].mul(n[1])).add(own[2].mul(n[2])), eq - eo)
+        };
+        let side = |b: f32| quotient_side(bound_num, den, Ff::from_f32(b), bound_k);
         let above_min = if tmin.is_infinite() { tmin < 0.0 } else { side(tmin) >= 0 };
         let below_max = if self.ray_tmax.is_infinite() { self.ray_tmax > 0.0 } else { side(self.ray_tmax) <= 0 };
         if !(above_min && below_max) {

@@ -468,7 +468,7 @@ fn faces(triangle: &[Vec3; 3], d: Vec3) -> bool {
 }
 
 /// The world ray's entry and exit of `b` widened by `widen` on every side,
-/// within `[tmin, tmax]`, conservatively (the far bound widened by 1 + 3·2^-23),
+/// within `[tmin, tmax]`, conservatively (the bounds widened by 3·2^-23 of their magnitude),
 /// or `None`.
 fn slab(b: &Aabb, widen: f32, o: Vec3, d: Vec3, inv: Vec3, tmin: f32, tmax: f32) -> Option<(f32, f32)> {
     let (mut t0, mut t1) = (tmin, tmax);
@@ -481,7 +481,10 @@ fn slab(b: &Aabb, widen: f32, o: Vec3, d: Vec3, inv: Vec3, tmin: f32, tmax: f32)
             continue;
         }
         let (ta, tb) = ((lo - o[a]) * inv[a], (hi - o[a]) * inv[a]);
-        t0 = t0.max(ta.min(tb));
+        // Both bounds widened (the near one down): a rounded entry compared with
+        // the ray's own tmax must not clip away a hit on the box's face.
+        let near = ta.min(tb);
+        t0 = t0.max(near - near.abs() * (3.0 * f32::EPSILON));
         t1 = t1.min(ta.max(tb) * (1.0 + 3.0 * f32::EPSILON));
     }
     (t0 <= t1).then_some((t0, t1))

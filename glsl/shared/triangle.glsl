@@ -124,6 +124,18 @@ vec2 sheared_exact(float v, float v_z, float o, float o_z, float dz, float s, in
     return ff_exact_sum8(float[8](pa.x, pa.y, pb.x, pb.y, pc.x, pc.y, pd.x, pd.y));
 }
 
+// 2^-40: 16x the float-float error of the exact test's 2D coordinates (one
+// rounding each) carried through an edge function's two products.
+const float ON_EDGE_GAMMA = 1.0 / 1099511627776.0;
+
+// The edge function e = p q - r s, or 0 within ON_EDGE_GAMMA of its products'
+// magnitude (twin of on_edge in WatertightRay::intersect_exact).
+vec2 on_edge(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
+    precise float m = abs(p.x * q.x) + abs(r.x * s.x);
+    precise float bound = m * ON_EDGE_GAMMA;
+    return abs(e.x) <= bound ? vec2(0.0) : e;
+}
+
 // The test in float-float (ff.glsl) on the f32 inputs, for rays near an edge, a
 // vertex or the ray's bounds (see the top). Its 2D coordinates come from the
 // ray's own origin (exact expansions for a shifted ray, sheared_exact); its t
@@ -134,7 +146,9 @@ vec2 sheared_exact(float v, float v_z, float o, float o_z, float dz, float s, in
 // are the same for every triangle sharing it, and the 2D edge functions are
 // antisymmetric with signs exact unless the ray passes within about 2^-44 of the
 // edge (relative to the coordinates), so the triangles around an edge or vertex
-// tile the plane: a ray through a vertex hits one of them, never none.
+// tile the plane: a ray through a vertex hits one of them, never none. Within
+// 2^-40 an edge function counts as 0 (on_edge): a ray through an edge where two
+// triangles fold hits them rather than slipping between.
 //
 // The hit's t lies in [tmin, r.ray_tmax] (in float-float, in the ray's own
 // parameter: t - t_shift + t_shift). Answers in the segment frame: t_out and
@@ -199,6 +213,13 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
     vec2 u = ff_sub(ff_mul(cx, by), ff_mul(cy, bx));
     vec2 v = ff_sub(ff_mul(ax, cy), ff_mul(ay, cx));
     vec2 w = ff_sub(ff_mul(bx, ay), ff_mul(by, ax));
+    // An edge function within the coordinates' rounding of 0 is 0: the ray
+    // passes through the edge, a hit. (Where two triangles fold, at a box
+    // corner or a mesh's border, their projections lie on one side of the edge
+    // and a rounding could put the ray outside both.)
+    u = on_edge(u, cx, by, cy, bx);
+    v = on_edge(v, ax, cy, ay, cx);
+    w = on_edge(w, bx, ay, by, ax);
     if ((u.x < 0.0 || v.x < 0.0 || w.x < 0.0) && (u.x > 0.0 || v.x > 0.0 || w.x > 0.0)) return false;
     vec2 det = ff_add(ff_add(u, v), w);
     if (det.x == 0.0) return false;
@@ -218,12 +239,25 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
     vec2 num = ff_add(ff_add(ff_mul(a[0], n[0]), ff_mul(a[1], n[1])), ff_mul(a[2], n[2]));
     vec2 den = ff_add(ff_add(ff_mul_f(n[0], d.x), ff_mul_f(n[1], d.y)), ff_mul_f(n[2], d.z));
     if (den.x == 0.0) return false;
-    // The ray's own bounds: tmin <= t_shift + t <= ray_tmax, with t = (num / den)
-    // 2^(es - eq), decided on the signs of num - b den (no rounded quotient: a hit
-    // exactly at a bound, a ray leaving a surface, stays decided exactly).
-    bool above_min = isinf(tmin) ? tmin < 0.0 : quotient_side(num, den, ff_diff(tmin, r.t_shift), eq - es) >= 0;
+    // The ray's own bounds: tmin <= t <= ray_tmax, with t = (num / den) 2^(es - eq),
+    // decided on the signs of num - b den (no rounded quotient: a hit exactly at a
+    // bound, a ray leaving a surface, stays decided exactly). A shifted ray's
+    // frame origin is off its own point by its error bound, so it decides its
+    // bounds from its own origin: num from the exact offset v0 - origin (a
+    // segment ending exactly on an axis-aligned triangle far away stays exact).
+    vec2 bound_num = num;
+    int bound_k = eq - es;
+    if (r.t_shift != 0.0) {
+        vec2 own[3];
+        for (uint i = 0u; i < 3u; ++i) own[i] = ff_diff(v0[i], r.origin[i]);
+        int eo_own = exponent_of(max(max(abs(own[0].x), abs(own[1].x)), abs(own[2].x)));
+        for (uint i = 0u; i < 3u; ++i) own[i] = ff_ldexp(own[i], -eo_own);
+        bound_num = ff_add(ff_add(ff_mul(own[0], n[0]), ff_mul(own[1], n[1])), ff_mul(own[2], n[2]));
+        bound_k = eq - eo_own;
+    }
+    bool above_min = isinf(tmin) ? tmin < 0.0 : quotient_side(bound_num, den, ff_from(tmin), bound_k) >= 0;
     bool below_max = isinf(r.ray_tmax) ? r.ray_tmax > 0.0
-                                       : quotient_side(num, den, ff_diff(r.ray_tmax, r.t_shift), eq - es) <= 0;
+                                       : quotient_side(bound_num, den, ff_from(r.ray_tmax), bound_k) <= 0;
     if (!(above_min && below_max)) return false;
     // t along the unscaled direction: t' 2^(es - eq).
     vec2 t_scaled = ff_div(num, den);

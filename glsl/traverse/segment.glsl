@@ -47,6 +47,14 @@ int flat_side(TraceRay r, uint axis, float plane) {
 // Distance (segment frame) along the ray to the plane `axis` = `plane`. With
 // seg_lo = 0 both forms give the same bits; kernels without SEGMENT_FRAME skip
 // the subtraction (lavapipe would run it).
+// The near bound widened down by |t| 3 2^-23, as the far one is widened up:
+// compared with the ray's own tmax, a rounded entry could pass it and clip away
+// a hit on the box's face (twin of widen_near in segment.rs).
+float widen_near(float t) {
+    precise float y = t - abs(t) * 3.5762786865234375e-7;
+    return y;
+}
+
 float plane_t(TraceRay r, uint axis, float plane) {
     precise float shifted = (plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis];
     precise float t = (SEGMENT_FRAME ? shifted : plane - r.wr.seg_origin[axis]) * r.inv_dir[axis];
@@ -94,7 +102,7 @@ bool clip_to_box(TraceRay r, vec3 bmin, vec3 bmax, out float t0, out float t1) {
         }
         float ta = plane_t(r, axis, bmin[axis]);
         float tb = plane_t(r, axis, bmax[axis]);
-        float tnear = minus_err(r, min(ta, tb));
+        float tnear = minus_err(r, widen_near(min(ta, tb)));
         precise float tfar_rel = max(ta, tb) * 1.0000003576278687;
         float tfar = plus_err(r, tfar_rel);
         t0 = max(t0, tnear);

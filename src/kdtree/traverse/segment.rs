@@ -33,6 +33,14 @@ pub(super) struct TraceRay {
 /// (Ize 2013). Widens the far bound so rounding never clips away a hit on the box.
 pub(super) const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
 
+/// The near bound widened down by the same relative amount, `|t|·3·2^-23`:
+/// compared with an unwidened end (the ray's own `tmax`), a rounded entry could
+/// pass it and clip away a hit on the box's face (a segment ending just past
+/// it). Twin of `widen_near` in segment.glsl.
+pub(super) fn widen_near(t: f32) -> f32 {
+    t - t.abs() * (3.0 * f32::EPSILON)
+}
+
 /// Distance (segment frame) to the plane `axis` = `plane`: `plane_t` in segment.glsl.
 pub(super) fn plane_t(r: &TraceRay, axis: usize, plane: f32) -> f32 {
     ((plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis]) * r.inv_dir[axis]
@@ -74,7 +82,7 @@ pub(super) fn clip_to_box(r: &TraceRay, b: &Aabb) -> Option<(f32, f32)> {
         }
         let ta = plane_t(r, axis, b.min[axis]);
         let tb = plane_t(r, axis, b.max[axis]);
-        let tnear = glsl_min(ta, tb) - r.t_err;
+        let tnear = widen_near(glsl_min(ta, tb)) - r.t_err;
         let tfar = glsl_max(ta, tb) * TFAR_SCALE + r.t_err;
         t0 = glsl_max(t0, tnear);
         t1 = glsl_min(t1, tfar);
