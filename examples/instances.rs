@@ -1,13 +1,14 @@
 //! Two-level against single-level tracing, measured: a mesh traced as one
 //! kd-tree ([`Tracer`], the single-level default) and as one identity instance
 //! ([`TwoLevelTracer`]), then a 4×4 grid of rotated copies traced two-level
-//! (one tree, 16 instances) and flattened (one tree over 16× the triangles).
+//! (one tree, 16 instances) and flattened (one tree over 16× the triangles);
+//! `SIDE` sets the grid's side (8: 64 copies).
 //! Camera rays (Morton order) of a 512×384 view; GPU time by timestamps, the
 //! median of 3 after a warm-up; device bytes; build times; and how many rays the
 //! two answers agree on (hit or miss, and the same triangle of the same copy).
 //!
 //! ```sh
-//! cargo run --release --example instances -- [SCENE.obj]   # default scenes/bunny.obj
+//! cargo run --release --example instances -- [SCENE.obj] [SIDE]   # default scenes/bunny.obj, 4
 //! ```
 
 use std::sync::Arc;
@@ -28,6 +29,12 @@ const REPEAT: usize = 3;
 
 fn main() -> anyhow::Result<()> {
     let path = std::env::args().nth(1).unwrap_or_else(|| "scenes/bunny.obj".into());
+    let side: u32 = match std::env::args().nth(2) {
+        Some(s) => s.parse().map_err(|_| anyhow::anyhow!("grid side {s:?}: expected a whole number"))?,
+        None => 4,
+    };
+    anyhow::ensure!((1..=32).contains(&side), "grid side {side}: expected 1 to 32");
+    let copies = side * side;
     let mesh = Scene::load(std::path::Path::new(&path))?.triangles;
     let ctx = GpuContext::headless(&ContextOptions::from_env())?;
     println!("{path}: {} triangles, {} ({WIDTH}x{HEIGHT} camera rays, robust stack)", mesh.len(), ctx.info.name);
@@ -54,11 +61,11 @@ fn main() -> anyhow::Result<()> {
     let same = single.0.iter().zip(&two.0).filter(|(s, t)| same_answer(s, t, 0, mesh.len())).count();
     println!("  same answer: {same} of {} rays; two level / single level time: {:.2}x", rays.len(), two.1 / single.1);
 
-    // A 4x4 grid of rotated copies.
+    // A side x side grid of rotated copies.
     let size = bounds.extent().max_element();
-    let instances: Vec<Instance> = (0..16)
+    let instances: Vec<Instance> = (0..copies)
         .map(|i| {
-            let at = Vec3::new((i % 4) as f32, (i / 4) as f32, 0.0) * size * 1.2 - bounds.center();
+            let at = Vec3::new((i % side) as f32, (i / side) as f32, 0.0) * size * 1.2 - bounds.center();
             let rotation = Quat::from_rotation_y(0.4 * i as f32);
             Instance {
                 geometry: 0,
@@ -69,7 +76,7 @@ fn main() -> anyhow::Result<()> {
         })
         .collect();
     let start = Instant::now();
-    let mut flat = Vec::with_capacity(16 * mesh.len());
+    let mut flat = Vec::with_capacity(copies as usize * mesh.len());
     for inst in &instances {
         flat.extend(mesh.iter().map(|t| t.map(|p| inst.transform.transform_point3(p))));
     }
@@ -78,13 +85,13 @@ fn main() -> anyhow::Result<()> {
     let grid_bounds = flat.iter().flatten().fold(Aabb::EMPTY, |b, &p| b.grow(p));
     let rays = camera_rays(&grid_bounds);
     let single = time_single(&ctx, &flat_tree, &flat, &rays)?;
-    report("single level, flattened", 16, single.1, rays.len(), single.2, build_ms);
+    report("single level, flattened", copies as usize, single.1, rays.len(), single.2, build_ms);
     let mut scene = scene;
     let start = Instant::now();
     scene.set_instances(&instances)?;
     let top_ms = start.elapsed().as_secs_f64() * 1e3;
     let two = time_two_level(&ctx, &scene, &rays)?;
-    report("two level", 16, two.1, rays.len(), two.2, top_ms);
+    report("two level", copies as usize, two.1, rays.len(), two.2, top_ms);
     let same =
         single.0.iter().zip(&two.0).filter(|(s, t)| same_answer(s, t, t.instance_index as usize, mesh.len())).count();
     println!("  same answer: {same} of {} rays; two level / single level time: {:.2}x", rays.len(), two.1 / single.1);
