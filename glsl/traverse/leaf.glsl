@@ -194,9 +194,12 @@ bool intersect_leaf(TraceRay r, uvec2 n, inout Closest best, inout TraceCounters
 }
 
 // True when the closest hit ends traversal at a segment ending at t1: any-hit
-// found one, or the closest hit lies within the segment.
+// found one, or the closest hit lies within the segment. Without a hit never (a
+// leaf's rounded exit may pass tmax although a hit at tmax lies beyond it):
+// traversal ends as for tmax = inf, on segments clipped to tmax (twin of
+// Closest::done in leaf.rs).
 bool leaf_done(Closest best, float t1) {
-    return ANY_HIT ? best.hit.prim_id != PRIM_MISS : best_reach(best) <= t1;
+    return ANY_HIT ? best.hit.prim_id != PRIM_MISS : (best.hit.prim_id != PRIM_MISS && best_reach(best) <= t1);
 }
 
 // Visits a leaf whose segment ends at t1.

@@ -38,12 +38,15 @@ impl Closest {
     }
 
     /// `leaf_done` in leaf.glsl: an any-hit found one, or the closest hit lies
-    /// inside the leaf's segment, which ends at `t1`.
+    /// inside the leaf's segment, which ends at `t1`. Without a hit never: a leaf
+    /// whose rounded exit passes the segment's end (`tmax`) has not covered it
+    /// (the exit of a split plane through the hit at `tmax` may round past it);
+    /// traversal ends as for a ray with `tmax = inf`, its segments clipped.
     pub(super) fn done(&self, any_hit: bool, t1: f32) -> bool {
         if any_hit {
             self.hit.prim_id != PRIM_MISS
         } else {
-            self.reach() <= t1
+            self.hit.prim_id != PRIM_MISS && self.reach() <= t1
         }
     }
 }
