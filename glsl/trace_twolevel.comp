@@ -77,9 +77,7 @@ bool enters_box(vec3 lo, vec3 hi, float widen, vec3 o, vec3 d, vec3 inv, float t
         }
         precise float ta = (l - o[a]) * inv[a];
         precise float tb = (h - o[a]) * inv[a];
-        precise float near = min(ta, tb);
-        precise float near_bound = near - abs(near) * 3.5762786865234375e-7;  // |near| 3 * 2^-23 down
-        t0 = max(t0, near_bound);
+        t0 = max(t0, widen_near(min(ta, tb)));  // segment.glsl
         precise float far_bound = max(ta, tb) * uintBitsToFloat(0x3f800003u);  // 1 + 3 * 2^-23
         t1 = min(t1, far_bound);
     }

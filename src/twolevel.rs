@@ -42,7 +42,7 @@ use crate::error::{Error, Result};
 use crate::ff::{exact_sum8, two_prod};
 use crate::geom::{Aabb, Ray};
 use crate::kdtree::links::TreeLinks;
-use crate::kdtree::traverse::{trace_ray, SceneRef, Traversal};
+use crate::kdtree::traverse::{trace_ray, widen_near, SceneRef, Traversal, TFAR_SCALE};
 use crate::kdtree::{BuildConfig, KdTree};
 use crate::scene::Geometry;
 
@@ -481,11 +481,11 @@ fn slab(b: &Aabb, widen: f32, o: Vec3, d: Vec3, inv: Vec3, tmin: f32, tmax: f32)
             continue;
         }
         let (ta, tb) = ((lo - o[a]) * inv[a], (hi - o[a]) * inv[a]);
-        // Both bounds widened (the near one down): a rounded entry compared with
-        // the ray's own tmax must not clip away a hit on the box's face.
-        let near = ta.min(tb);
-        t0 = t0.max(near - near.abs() * (3.0 * f32::EPSILON));
-        t1 = t1.min(ta.max(tb) * (1.0 + 3.0 * f32::EPSILON));
+        // Both bounds widened as the scene-box clip widens them (the near one down:
+        // a rounded entry compared with the ray's own tmax must not clip away a hit
+        // on the box's face).
+        t0 = t0.max(widen_near(ta.min(tb)));
+        t1 = t1.min(ta.max(tb) * TFAR_SCALE);
     }
     (t0 <= t1).then_some((t0, t1))
 }

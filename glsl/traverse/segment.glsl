@@ -44,17 +44,18 @@ int flat_side(TraceRay r, uint axis, float plane) {
     return gap > r.band[axis] ? -1 : (gap < -r.band[axis] ? 1 : 0);
 }
 
-// Distance (segment frame) along the ray to the plane `axis` = `plane`. With
-// seg_lo = 0 both forms give the same bits; kernels without SEGMENT_FRAME skip
-// the subtraction (lavapipe would run it).
 // The near bound widened down by |t| 3 2^-23, as the far one is widened up:
 // compared with the ray's own tmax, a rounded entry could pass it and clip away
-// a hit on the box's face (twin of widen_near in segment.rs).
+// a hit on the box's face (twin of widen_near in segment.rs; also the
+// two-level kernel's instance boxes).
 float widen_near(float t) {
     precise float y = t - abs(t) * 3.5762786865234375e-7;
     return y;
 }
 
+// Distance (segment frame) along the ray to the plane `axis` = `plane`. With
+// seg_lo = 0 both forms give the same bits; kernels without SEGMENT_FRAME skip
+// the subtraction (lavapipe would run it).
 float plane_t(TraceRay r, uint axis, float plane) {
     precise float shifted = (plane - r.wr.seg_origin[axis]) - r.wr.seg_lo[axis];
     precise float t = (SEGMENT_FRAME ? shifted : plane - r.wr.seg_origin[axis]) * r.inv_dir[axis];

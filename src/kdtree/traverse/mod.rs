@@ -33,6 +33,7 @@ use segment::{clip_to_box, glsl_max, TraceRay};
 
 pub use crate::traversal::{Traversal, Variant};
 pub use node::Counters;
+pub(crate) use segment::{widen_near, TFAR_SCALE};
 
 /// What a traversal needs: the tree, the triangles it indexes and the scene box.
 #[derive(Clone, Copy)]

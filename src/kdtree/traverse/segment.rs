@@ -31,13 +31,13 @@ pub(super) struct TraceRay {
 
 /// 1 + 2·gamma(3) with gamma(n) = n·u / (1 - n·u), u = 2^-24, rounded up: 1 + 3·2^-23
 /// (Ize 2013). Widens the far bound so rounding never clips away a hit on the box.
-pub(super) const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
+pub(crate) const TFAR_SCALE: f32 = 1.0 + 3.0 * f32::EPSILON;
 
 /// The near bound widened down by the same relative amount, `|t|·3·2^-23`:
 /// compared with an unwidened end (the ray's own `tmax`), a rounded entry could
 /// pass it and clip away a hit on the box's face (a segment ending just past
-/// it). Twin of `widen_near` in segment.glsl.
-pub(super) fn widen_near(t: f32) -> f32 {
+/// it). Twin of `widen_near` in segment.glsl; also the two-level top level's boxes.
+pub(crate) fn widen_near(t: f32) -> f32 {
     t - t.abs() * (3.0 * f32::EPSILON)
 }
 
