@@ -630,5 +630,13 @@ mod tests {
             let f = Frac { num: BigInt::from(num) << 300usize, den: BigInt::from(den) << 300usize };
             assert_eq!(frac_to_f64(&f), num as f64 / den as f64);
         }
+        // A numerator with fewer bits than the denominator and a low bit that
+        // matters at f64 precision: (2^100 + 2^50) / 2^120 = 2^-20 + 2^-70 (cutting
+        // both to the denominator's top 64 bits dropped the 2^50).
+        let f = Frac {
+            num: (BigInt::from(1) << 100usize) + (BigInt::from(1) << 50usize),
+            den: BigInt::from(1) << 120usize,
+        };
+        assert_eq!(frac_to_f64(&f), 2f64.powi(-20) + 2f64.powi(-70));
     }
 }
