@@ -75,6 +75,7 @@ const float FLT_MAX = 3.40282347e38;
 #include "packet_stack.glsl"
 #include "packet_short_stack.glsl"
 #include "ray_setup.glsl"
+#include "careful_list.glsl"
 
 // Runs the variant on one ray (every lane enters for packets: their decisions
 // are ballots). False when the driver cut a loop short.
@@ -161,18 +162,7 @@ void trace_ray(uint index) {
     bool finished = run_traversal(alive && !skip, r, t0, t1, best, c);
     bool needs_careful = best.needs_careful;  // a plain bool: the && below stays branch-free
     if (PASS == PASS_FAST && alive && needs_careful) {
-        uint slot = atomicAdd(careful[3], 1u);
-        careful[CAREFUL_HEADER_WORDS + slot] = index;
-        // One more workgroup for the careful pass at every TRACE_WORKGROUP_SIZE-th ray:
-        // the first CAREFUL_MAX_GROUPS in x, then one more row in y per as many.
-        if (slot % TRACE_WORKGROUP_SIZE == 0u) {
-            uint group = slot / TRACE_WORKGROUP_SIZE;
-            if (group < CAREFUL_MAX_GROUPS) {
-                atomicAdd(careful[0], 1u);
-            } else if (group % CAREFUL_MAX_GROUPS == 0u) {
-                atomicAdd(careful[1], 1u);
-            }
-        }
+        list_for_careful_pass(index);
         return;
     }
     // final_hit (ray_setup.glsl) written out.
@@ -203,9 +193,7 @@ void main() {
     // every ray dearer). The careful pass takes the listed rays, in rows of
     // CAREFUL_MAX_GROUPS workgroups.
     bool listed = PASS == PASS_CAREFUL;
-    uint id = listed ? (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * TRACE_WORKGROUP_SIZE +
-                           gl_LocalInvocationID.x
-                     : gl_GlobalInvocationID.x;
+    uint id = listed ? careful_slot() : gl_GlobalInvocationID.x;
     uint count = listed ? careful[3] : params.ray_count;
     if (id >= count) return;
     // The careful pass lists ray indices; an ordered batch traces ray order[id].

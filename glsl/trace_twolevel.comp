@@ -9,7 +9,9 @@
 // Every geometry's nodes and triangle references share one texel buffer each;
 // `node_base` and `texel_base` (GEOMETRY_BASES in node.glsl and leaf.glsl) say
 // where the instance being traced starts. Robust instances trace carefully in
-// one pass (PASS_ONE): no fast pass lists rays here.
+// one pass (PASS_ONE), except in a scene of one instance (ONE_INSTANCE): there,
+// as in trace.comp, a fast pass lists the rays it cannot decide in f32 and a
+// careful pass (dispatched indirectly) traces them.
 
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
@@ -31,7 +33,8 @@ layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;
 layout(constant_id = TRACE_SPEC_PACKET_WIDTH) const uint PACKET_WIDTH = 1u;   // single rays only
 layout(constant_id = TRACE_SPEC_ROBUST) const bool ROBUST = true;
 layout(constant_id = TRACE_SPEC_PASS) const uint PASS = PASS_ONE;
-// The scene has one instance: no top-level loop (src/twolevel/gpu.rs picks this pipeline then).
+// The scene has one instance: no top-level loop (src/twolevel/gpu.rs picks this
+// pipeline then), and for robust rays PASS_FAST / PASS_CAREFUL.
 layout(constant_id = TL_SPEC_ONE_INSTANCE) const bool ONE_INSTANCE = false;
 
 const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
@@ -41,11 +44,51 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 layout(set = 0, binding = TL_BINDING_NODES, rg32ui) uniform readonly uimageBuffer node_texels;
 layout(set = 0, binding = TL_BINDING_TRIANGLES, rgba32ui) uniform readonly uimageBuffer tri_texels;
 layout(std430, set = 0, binding = TL_BINDING_RAYS) readonly buffer Rays { uvec4 ray_words[]; };
-layout(std430, set = 0, binding = TL_BINDING_HITS) writeonly buffer Hits { GpuInstanceHit hits[]; };
-layout(std430, set = 0, binding = TL_BINDING_GEOMETRIES) readonly buffer Geometries { GpuGeometry geometries[]; };
-layout(std430, set = 0, binding = TL_BINDING_INSTANCES) readonly buffer Instances { GpuInstance instances[]; };
-layout(std430, set = 0, binding = TL_BINDING_TOP) readonly buffer Top { TopNode top_nodes[]; };
-layout(std430, set = 0, binding = TL_BINDING_ORDER) readonly buffer Order { uint top_order[]; };
+// Hits are written as two uvec4 words (a GpuInstanceHit each).
+layout(std430, set = 0, binding = TL_BINDING_HITS) writeonly buffer Hits { uvec4 hit_words[]; };
+
+void write_hit(uint index, GpuInstanceHit h) {
+    hit_words[2u * index] = uvec4(floatBitsToUint(h.t), h.prim_index, floatBitsToUint(h.u), floatBitsToUint(h.v));
+    hit_words[2u * index + 1u] = uvec4(h.instance_id, h.geometry_id, h.front_face, h.instance_index);
+}
+// The geometries (3 texels each), instances (4), top-level nodes (3) and the
+// leaves' instance order (1) are texel buffers too: lavapipe loads a storage
+// buffer's struct one lane and one word at a time, which cost one identity
+// instance about 2,000 instructions per subgroup (tools/shader-instructions).
+layout(set = 0, binding = TL_BINDING_GEOMETRIES, rgba32ui) uniform readonly uimageBuffer geometry_texels;
+layout(set = 0, binding = TL_BINDING_INSTANCES, rgba32ui) uniform readonly uimageBuffer instance_texels;
+layout(set = 0, binding = TL_BINDING_TOP, rgba32ui) uniform readonly uimageBuffer top_texels;
+layout(set = 0, binding = TL_BINDING_ORDER, r32ui) uniform readonly uimageBuffer order_texels;
+
+GpuGeometry load_geometry(uint g) {
+    int base = int(g) * 3;
+    uvec4 a = imageLoad(geometry_texels, base);
+    uvec4 b = imageLoad(geometry_texels, base + 1);
+    uvec4 c = imageLoad(geometry_texels, base + 2);
+    return GpuGeometry(uintBitsToFloat(a), uintBitsToFloat(b), c.x, c.y, c.z, c.w);
+}
+
+GpuInstance load_instance(uint i) {
+    int base = int(i) * 4;
+    vec4 r0 = uintBitsToFloat(imageLoad(instance_texels, base));
+    vec4 r1 = uintBitsToFloat(imageLoad(instance_texels, base + 1));
+    vec4 r2 = uintBitsToFloat(imageLoad(instance_texels, base + 2));
+    uvec4 d = imageLoad(instance_texels, base + 3);
+    return GpuInstance(r0, r1, r2, d.x, d.y, d.z, d.w);
+}
+
+TopNode load_top(uint n) {
+    int base = int(n) * 3;
+    uvec4 a = imageLoad(top_texels, base);
+    uvec4 b = imageLoad(top_texels, base + 1);
+    uvec4 c = imageLoad(top_texels, base + 2);
+    return TopNode(uintBitsToFloat(a), uintBitsToFloat(b), c.x, c.y, c.z, c.w);
+}
+
+uint load_order(uint k) { return imageLoad(order_texels, int(k)).x; }
+
+// The rays the fast pass leaves to the careful pass (careful_list.glsl).
+layout(std430, set = 0, binding = TL_BINDING_CAREFUL) coherent buffer Careful { uint careful[]; };
 
 layout(push_constant) uniform Push { TwoLevelParams params; };
 
@@ -61,11 +104,14 @@ uint texel_base = 0u;
 #include "push_down.glsl"
 #include "short_stack.glsl"
 #include "ray_setup.glsl"
+#include "careful_list.glsl"
 
 // The entry of the world ray into the box [lo - widen, hi + widen] within
 // [tmin, tmax], conservatively (the far bound times 1 + 3 * 2^-23). CPU twin:
 // `slab` in src/twolevel.rs.
-bool enters_box(vec3 lo, vec3 hi, float widen, vec3 o, vec3 d, vec3 inv, float tmin, float tmax, out float entry) {
+bool enters_box(vec3 lo, vec3 hi, float far_scale, float condition, vec3 o, vec3 d, vec3 inv, float tmin, float tmax,
+                out float entry) {
+    precise float widen = far_scale * condition;
     float t0 = tmin;
     float t1 = tmax;
     [[unroll]] for (uint a = 0u; a < 3u; ++a) {
@@ -111,6 +157,13 @@ bool front_facing(uint reference, vec3 d) {
     precise float nx = e1.y * e2.z - e2.y * e1.z;
     precise float ny = e1.z * e2.x - e2.z * e1.x;
     precise float nz = e1.x * e2.y - e2.x * e1.y;
+    // The f32 dot product decides where its rounding (below 3 * 2^-24 of the
+    // products' magnitudes) cannot reach zero; else the exact sum.
+    precise float dot_f32 = (nx * d.x + ny * d.y) + nz * d.z;
+    precise float magnitude = (abs(nx * d.x) + abs(ny * d.y)) + abs(nz * d.z);
+    if (abs(dot_f32) > magnitude * (1.0 / 2097152.0) && magnitude > 7.88860905e-31) {  // 2^-21, 2^-100
+        return dot_f32 < 0.0;
+    }
     vec2 px = ff_two_prod(nx, d.x);
     vec2 py = ff_two_prod(ny, d.y);
     vec2 pz = ff_two_prod(nz, d.z);
@@ -118,8 +171,9 @@ bool front_facing(uint reference, vec3 d) {
 }
 
 // Traces the object ray of one instance through its geometry (trace.comp's
-// trace_ray, one careful pass). `reference`: the hit's triangle reference.
-Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
+// trace_ray). `reference`: the hit's triangle reference. `needs_careful`: the
+// fast pass met what it leaves to the careful pass (the hit is not the answer).
+Hit trace_instance(Ray ray, GpuGeometry g, out uint reference, out bool needs_careful) {
     node_base = g.node_base;
     texel_base = g.texel_base;
     Closest best = closest_none(ray.tmax);
@@ -129,8 +183,11 @@ Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
     bool valid, far;
     bool alive = setup_ray(ray, g.bounds_min.xyz, g.bounds_max.xyz, r, t0, t1, valid, far, best);
     if (!valid) best.hit.prim_id = PRIM_INVALID;
+    // The fast pass leaves far rays to the careful one (without tracing them).
+    bool skip = PASS == PASS_FAST && far;
+    if (skip) best.needs_careful = true;
     bool finished = true;
-    if (alive) {
+    if (alive && !skip) {
         if (VARIANT == VARIANT_RESTART) {
             finished = trace_restart(r, t0, t1, best, c);
         } else if (VARIANT == VARIANT_PUSH_DOWN) {
@@ -144,20 +201,27 @@ Hit trace_instance(Ray ray, GpuGeometry g, out uint reference) {
         }
     }
     reference = best.reference;
+    needs_careful = PASS == PASS_FAST && alive && best.needs_careful;
     return final_hit(best, r, finished);
 }
 
 // Traces instance `i` if the dispatch's mask sees it, keeping the closest hit in
 // `best` (CPU twin: the instance loop of `TwoLevelScene::trace`); `incomplete`
-// notes an instance cut short. True when an any-hit trace is done.
-bool visit_instance(uint i, Ray ray, inout GpuInstanceHit best, inout bool incomplete) {
-    GpuInstance inst = instances[i];
+// notes an instance cut short, `listed` one the fast pass leaves to the careful
+// pass. True when an any-hit trace is done.
+bool visit_instance(uint i, Ray ray, inout GpuInstanceHit best, inout bool incomplete, inout bool listed) {
+    GpuInstance inst = load_instance(i);
     if ((inst.mask & params.mask) == 0u) return false;
-    GpuGeometry g = geometries[inst.geometry];
+    GpuGeometry g = load_geometry(inst.geometry);
     Ray object = object_ray(inst, ray);
     object.tmax = min(best.t, ray.tmax);
     uint reference;
-    Hit hit = trace_instance(object, g, reference);
+    bool needs_careful;
+    Hit hit = trace_instance(object, g, reference, needs_careful);
+    if (needs_careful) {
+        listed = true;
+        return true;
+    }
     if (hit.prim_id >= PRIM_INCOMPLETE) {
         // Cut short (or an object ray the transform made invalid).
         if (hit.prim_id != PRIM_MISS) incomplete = true;
@@ -181,7 +245,7 @@ void trace_world(uint index) {
     if (!valid) best.prim_index = PRIM_INVALID;
     if (!valid || (params.mask & 0xffu) == 0u || params.top_nodes == 0u) {
         if (!valid) best.t = uintBitsToFloat(0x7fc00000u);
-        hits[index] = best;
+        write_hit(index, best);
         return;
     }
     vec3 o = ray.origin;
@@ -191,6 +255,7 @@ void trace_world(uint index) {
     // in src/twolevel.rs): boxes widen by it times each subtree's condition number.
     precise float far_scale = max(abs(o.x), max(abs(o.y), abs(o.z))) * (1.0 / 1048576.0);
     bool incomplete = false;
+    bool listed = false;
     bool done = false;
     uint stack[MAX_TOP_STACK];
     stack[0] = 0u;
@@ -199,11 +264,10 @@ void trace_world(uint index) {
         // The top level is one leaf holding one instance: its box, then the
         // instance, with no loop around the object-space traversal (lavapipe runs
         // a loop's body under the loop's mask; see docs/EMBEDDING.md).
-        TopNode node = top_nodes[0];
+        TopNode node = load_top(0u);
         float entry;
-        precise float widen = far_scale * node.bounds_min.w;
-        if (enters_box(node.bounds_min.xyz, node.bounds_max.xyz, widen, o, d, inv, ray.tmin, ray.tmax, entry)) {
-            done = visit_instance(top_order[0], ray, best, incomplete);
+        if (enters_box(node.bounds_min.xyz, node.bounds_max.xyz, far_scale, node.bounds_min.w, o, d, inv, ray.tmin, ray.tmax, entry)) {
+            done = visit_instance(load_order(0u), ray, best, incomplete, listed);
         }
         sp = 0u;
     } else while (sp > 0u && !done) {
@@ -211,23 +275,20 @@ void trace_world(uint index) {
         // one the driver ends early leaves entries, caught below.
         --sp;
         uint n = stack[sp];
-        TopNode node = top_nodes[n];
+        TopNode node = load_top(n);
         float reach = min(best.t, ray.tmax);
         float entry;
-        precise float widen = far_scale * node.bounds_min.w;
-        if (!enters_box(node.bounds_min.xyz, node.bounds_max.xyz, widen, o, d, inv, ray.tmin, reach, entry)) continue;
+        if (!enters_box(node.bounds_min.xyz, node.bounds_max.xyz, far_scale, node.bounds_min.w, o, d, inv, ray.tmin, reach, entry)) continue;
         if (node.count == 0u) {
             uint a = n + 1u;
             uint b = node.index;
-            TopNode na = top_nodes[a];
-            TopNode nb = top_nodes[b];
+            TopNode na = load_top(a);
+            TopNode nb = load_top(b);
             float ta, tb;
-            precise float wa = far_scale * na.bounds_min.w;
-            precise float wb = far_scale * nb.bounds_min.w;
-            if (!enters_box(na.bounds_min.xyz, na.bounds_max.xyz, wa, o, d, inv, ray.tmin, reach, ta)) {
+            if (!enters_box(na.bounds_min.xyz, na.bounds_max.xyz, far_scale, na.bounds_min.w, o, d, inv, ray.tmin, reach, ta)) {
                 ta = uintBitsToFloat(0x7f800000u);
             }
-            if (!enters_box(nb.bounds_min.xyz, nb.bounds_max.xyz, wb, o, d, inv, ray.tmin, reach, tb)) {
+            if (!enters_box(nb.bounds_min.xyz, nb.bounds_max.xyz, far_scale, nb.bounds_min.w, o, d, inv, ray.tmin, reach, tb)) {
                 tb = uintBitsToFloat(0x7f800000u);
             }
             // The nearer child is popped first.
@@ -238,11 +299,15 @@ void trace_world(uint index) {
             continue;
         }
         for (uint k = node.index; k < node.index + node.count; ++k) {
-            if (visit_instance(top_order[k], ray, best, incomplete)) {
+            if (visit_instance(load_order(k), ray, best, incomplete, listed)) {
                 done = true;
                 break;
             }
         }
+    }
+    if (PASS == PASS_FAST && listed) {
+        list_for_careful_pass(index);
+        return;
     }
     // A loop the driver ended early leaves entries on the stack: not a miss.
     if (sp > 0u && !done) incomplete = true;
@@ -250,11 +315,14 @@ void trace_world(uint index) {
         best = GpuInstanceHit(uintBitsToFloat(0x7fc00000u), PRIM_INCOMPLETE, 0.0, 0.0, 0xffffffffu, 0xffffffffu, 0u,
                               0xffffffffu);
     }
-    hits[index] = best;
+    write_hit(index, best);
 }
 
 void main() {
-    uint id = gl_GlobalInvocationID.x;
-    if (id >= params.ray_count) return;
-    trace_world(id);
+    // The careful pass traces the rays the fast pass listed.
+    bool from_list = PASS == PASS_CAREFUL;
+    uint id = from_list ? careful_slot() : gl_GlobalInvocationID.x;
+    uint count = from_list ? careful[3] : params.ray_count;
+    if (id >= count) return;
+    trace_world(from_list ? careful[CAREFUL_HEADER_WORDS + id] : id);
 }

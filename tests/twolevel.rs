@@ -359,6 +359,33 @@ fn two_level_traces_record_into_an_engine_frame() {
     assert_eq!(tracer.release_retired(0), 0);
     assert_eq!(tracer.release_retired(1), 1);
     assert_eq!(tracer.retired_bytes(), 0);
+    // One instance: a robust trace records a fast and an indirect careful pass.
+    // Recorded twice with one binding in one command buffer (the caller's barrier
+    // on its hit range between), the second reuses the binding's list: kdtrace's
+    // barriers order its reset after the first's careful pass (without the one
+    // before the reset, validation reports SYNC-HAZARD-WRITE-AFTER-READ: checked).
+    scene.set_instances(&grid(1, 0.2)).unwrap();
+    tracer.set_instances(&scene).unwrap();
+    let one = tracer.trace(&rays, 0xff, traversal).unwrap();
+    let cpu: Vec<InstanceHit> = rays.iter().map(|r| scene.trace(r, 0xff, traversal)).collect();
+    assert_eq!(one, cpu, "one instance");
+    assert!(one.iter().any(|h| h.is_hit()), "the rays should hit the one sphere");
+    let mut recorded = Ok(());
+    ctx.submit_and_wait(|cmd| {
+        // SAFETY: `cmd` is recording; bindings, buffers and tracer outlive the wait.
+        recorded = unsafe {
+            tracer
+                .record_binding(cmd, &binding, rays.len() as u32, 0xff)
+                .map(|_| hits_written_before_rewrite(&ctx, cmd, &hit_buf))
+                .and_then(|_| tracer.record_binding(cmd, &binding, rays.len() as u32, 0xff))
+                .and_then(|_| tracer.record_binding(cmd, &binding2, rays.len() as u32, 0xff))
+        };
+        host_read_barrier(&ctx, cmd);
+    })
+    .unwrap();
+    recorded.unwrap();
+    assert_eq!(read(&hit_buf), one, "one instance, recorded twice");
+    assert_eq!(read(&hit_buf2), one, "one instance, second recording");
     drop(binding2);
     // Nine instances: the buffers grow and the binding made before is refused.
     scene.set_instances(&grid(9, 0.0)).unwrap();
@@ -448,6 +475,26 @@ fn two_level_edge_cases_match_the_cpu_twin() {
 }
 
 /// The engine's barrier from the trace's writes to the host's reads of the hits.
+/// The caller's barrier between two traces writing the same hit buffer.
+fn hits_written_before_rewrite(
+    ctx: &kdtrace::gpu::GpuContext,
+    cmd: kdtrace::ash::vk::CommandBuffer,
+    hits: &kdtrace::gpu::Buffer,
+) {
+    use kdtrace::ash::vk;
+    let barrier = [vk::BufferMemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .dst_access_mask(vk::AccessFlags::SHADER_WRITE)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .buffer(hits.buffer)
+        .offset(0)
+        .size(vk::WHOLE_SIZE)];
+    let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+    // SAFETY: a barrier in a command buffer the caller is recording.
+    unsafe { ctx.device.cmd_pipeline_barrier(cmd, compute, compute, vk::DependencyFlags::empty(), &[], &barrier, &[]) };
+}
+
 fn host_read_barrier(ctx: &kdtrace::gpu::GpuContext, cmd: kdtrace::ash::vk::CommandBuffer) {
     use kdtrace::ash::vk;
     let barrier = [vk::MemoryBarrier::default()

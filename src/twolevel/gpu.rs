@@ -1,19 +1,23 @@
 //! A two-level scene on a device ([`TwoLevelTracer`]): every geometry's nodes
 //! and triangle references in one texel buffer each, the geometries, the
-//! instances and the top-level BVH in storage buffers, traced by
+//! instances, the top-level BVH and its leaves' order in texel buffers too
+//! (lavapipe loads storage-buffer structs a word and a lane at a time), traced by
 //! glsl/trace_twolevel.comp with the answers of [`TwoLevelScene::trace`].
 
 use std::sync::Arc;
 
 use ash::vk;
+use bytemuck::Zeroable;
 use gpu_allocator::MemoryLocation;
 
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    MAX_TOP_STACK, PASS_ONE, TL_BINDINGS, TL_BINDING_NODES, TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS,
-    TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST,
-    TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    CAREFUL_HEADER_WORDS, MAX_TOP_STACK, PASS_CAREFUL, PASS_FAST, PASS_ONE, TL_BINDINGS, TL_BINDING_CAREFUL,
+    TL_BINDING_GEOMETRIES, TL_BINDING_HITS, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
+    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
+    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
@@ -27,10 +31,14 @@ use crate::traversal::{Traversal, Variant};
 ///
 /// Trace with [`TwoLevelTracer::trace`] (uploads the rays, submits, waits), or
 /// in an engine's command buffer with [`TwoLevelTracer::bind`] and
-/// [`TwoLevelTracer::record_binding`]: one dispatch, no barrier of kdtrace's
-/// own (the contract of [`crate::trace::Tracer::record_trace`]: make your ray
-/// writes visible to `COMPUTE_SHADER` reads before, and the hits to their reader
-/// after; the dispatch binds kdtrace's pipeline, set 0 and push constants).
+/// [`TwoLevelTracer::record_binding`] under the contract of
+/// [`crate::trace::Tracer::record_trace`]: make your ray writes visible to
+/// `COMPUTE_SHADER` reads before, and the hits to their reader after; the
+/// recording binds kdtrace's pipeline, set 0 and push constants. One dispatch;
+/// a robust trace of a scene of one instance records two, as `Tracer` does (a
+/// fast pass, and an indirect careful pass over the rays it listed), with
+/// kdtrace's own buffer barriers on the binding's list and your hit range
+/// between them.
 pub struct TwoLevelTracer {
     ctx: Arc<GpuContext>,
     nodes: Buffer,
@@ -47,13 +55,23 @@ pub struct TwoLevelTracer {
     /// Incremented when the instance buffers are reallocated: older bindings are refused.
     generation: u64,
     /// Pipelines by traversal, compiled on first use: the general one, and while
-    /// the scene has one instance the one without a top-level loop.
-    kernels: Vec<(Traversal, Kernel, Option<Kernel>)>,
+    /// the scene has one instance those without a top-level loop.
+    kernels: Vec<(Traversal, Kernel, Option<OneInstance>)>,
     /// The scene has exactly one instance.
     one_instance: bool,
     /// Buffers a recorded update replaced or staged through, each under the
     /// frame value that may still use them ([`TwoLevelTracer::release_retired`]).
     retired: Vec<(u64, Buffer)>,
+}
+
+/// The pipelines of a scene of one instance (no top-level loop): one pass, or
+/// for robust traces a fast pass and a careful pass over the rays it lists.
+/// Measured on lavapipe, one identity instance of the bunny (19,200 camera
+/// rays): 42.0 M instructions in one careful pass against 38.0 M in two (see
+/// docs/EMBEDDING.md); with the top-level loop a split measured no faster.
+struct OneInstance {
+    main: Kernel,
+    careful: Option<Kernel>,
 }
 
 /// The device records of a scene's instances and top level.
@@ -68,6 +86,10 @@ struct InstanceRecords {
 #[must_use = "the descriptor set must live until the command buffer that uses it completes"]
 pub struct TwoLevelBinding {
     set: BufferSet,
+    /// The careful pass's list (header and, for robust traces, one word per ray).
+    list: Buffer,
+    /// The bound hit range (the barrier between the fast and the careful pass names it).
+    hits: BufferRange,
     kernel: usize,
     generation: u64,
     /// Rays the bound ranges hold.
@@ -112,14 +134,21 @@ impl TwoLevelTracer {
                 )));
             }
         }
+        // A texel buffer holds at least one texel (a scene without geometries or triangles).
+        if geometries.is_empty() {
+            geometries.push(GpuGeometry::zeroed());
+        }
+        if texels.is_empty() {
+            texels.push([0; 4]);
+        }
         let capacity = scene.placed.len().max(1);
         let [instances, top, order] = instance_buffers(ctx, capacity)?;
         let mut tracer = TwoLevelTracer {
             ctx: ctx.clone(),
             nodes: Buffer::with_data(ctx, bytemuck::cast_slice(&nodes), TEXEL, "two-level nodes")?,
             triangles: Buffer::with_data(ctx, bytemuck::cast_slice(&texels), TEXEL, "two-level triangles")?,
-            geometries: Buffer::with_data(ctx, bytemuck::cast_slice(&geometries), STORAGE, "two-level geometries")?,
-            geometry_count: geometries.len(),
+            geometries: Buffer::with_data(ctx, bytemuck::cast_slice(&geometries), TEXEL, "two-level geometries")?,
+            geometry_count: scene.geometries.len(),
             instances,
             top,
             order,
@@ -438,18 +467,34 @@ impl TwoLevelTracer {
             return Err(Error::InvalidInput("the ray and hit ranges overlap".into()));
         }
         let kernel = self.kernel(traversal)?;
-        let scene = [&self.nodes, &self.triangles, &self.geometries, &self.instances, &self.top, &self.order]
-            .map(BufferRange::whole);
-        let ranges = [scene[0], scene[1], rays, hits, scene[2], scene[3], scene[4], scene[5]];
-        // SAFETY: the scene buffers are this tracer's; the caller vouches for the rest.
-        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1, &ranges)? };
         let capacity = (rays.range / RAY_BYTES).min(hits.range / HIT_BYTES).min(u64::from(u32::MAX)) as u32;
-        Ok(TwoLevelBinding { set, kernel, generation: self.generation, capacity })
+        // Robust traces of one instance list rays for the careful pass; the others
+        // bind a list they never touch.
+        let words = CAREFUL_HEADER_WORDS as u64 + if traversal.robust { u64::from(capacity) } else { 0 };
+        let usage = STORAGE | vk::BufferUsageFlags::INDIRECT_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
+        let list = Buffer::new(&self.ctx, words * 4, usage, MemoryLocation::GpuOnly, "two-level careful list")?;
+        let mut ranges = [rays; TL_BINDINGS as usize];
+        for (binding, buffer) in [
+            (TL_BINDING_NODES, &self.nodes),
+            (TL_BINDING_TRIANGLES, &self.triangles),
+            (TL_BINDING_GEOMETRIES, &self.geometries),
+            (TL_BINDING_INSTANCES, &self.instances),
+            (TL_BINDING_TOP, &self.top),
+            (TL_BINDING_ORDER, &self.order),
+            (TL_BINDING_CAREFUL, &list),
+        ] {
+            ranges[binding as usize] = BufferRange::whole(buffer);
+        }
+        ranges[TL_BINDING_HITS as usize] = hits;
+        // SAFETY: the scene buffers and the list are this tracer's; the caller vouches for the rest.
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1, &ranges)? };
+        Ok(TwoLevelBinding { set, list, hits, kernel, generation: self.generation, capacity })
     }
 
     /// Records into `cmd` the two-level trace of the first `count` rays of
     /// `binding`'s ray range, visible to the instances whose mask shares a bit
-    /// with `mask`: one dispatch (nothing for `count` 0).
+    /// with `mask`: one dispatch, or two for a robust trace of one instance (see
+    /// the type docs); nothing for `count` 0.
     ///
     /// Errors: `Error::InvalidInput` for a binding made before the instance
     /// buffers were reallocated, or more rays than its ranges hold.
@@ -476,15 +521,65 @@ impl TwoLevelTracer {
         if count > 0 {
             let params =
                 TwoLevelParams { ray_count: count, mask: u32::from(mask), top_nodes: self.top_node_count, pad: 0 };
+            let push = bytemuck::bytes_of(&params);
             let (_, general, one) = &self.kernels[binding.kernel];
-            let kernel = match one {
-                Some(one) if self.one_instance => one,
-                _ => general,
-            };
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
-            unsafe { kernel.record_dispatch(cmd, binding.set.set, bytemuck::bytes_of(&params), count) };
+            unsafe {
+                match one {
+                    Some(OneInstance { main, careful: Some(careful) }) if self.one_instance => {
+                        self.record_two_passes(cmd, binding, main, careful, push, count)
+                    }
+                    Some(one) if self.one_instance => one.main.record_dispatch(cmd, binding.set.set, push, count),
+                    _ => general.record_dispatch(cmd, binding.set.set, push, count),
+                }
+            }
         }
         Ok(())
+    }
+
+    /// Records a robust one-instance trace: the list emptied, the fast pass, the
+    /// careful pass over the rays it listed (indirect), with kdtrace's own buffer
+    /// barriers on the list and the hit range (as `Tracer`'s two passes).
+    ///
+    /// # Safety
+    /// As [`TwoLevelTracer::record_binding`].
+    unsafe fn record_two_passes(
+        &self,
+        cmd: vk::CommandBuffer,
+        binding: &TwoLevelBinding,
+        fast: &Kernel,
+        careful: &Kernel,
+        push: &[u8],
+        count: u32,
+    ) {
+        let device = &self.ctx.device;
+        let barrier =
+            |src: vk::PipelineStageFlags, dst: vk::PipelineStageFlags, buffers: &[vk::BufferMemoryBarrier]| {
+                // SAFETY: `cmd` is recording (the caller's contract); the buffers are live.
+                unsafe { device.cmd_pipeline_barrier(cmd, src, dst, vk::DependencyFlags::empty(), &[], buffers, &[]) };
+            };
+        let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
+        let (write, read_write) =
+            (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+        let list = BufferRange::whole(&binding.list);
+        // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
+        // recording's passes are done with it.
+        let indirect = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
+        barrier(indirect, transfer, &[buffer_barrier(list, write, vk::AccessFlags::TRANSFER_WRITE)]);
+        let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
+        // SAFETY: as above; the list holds at least the header.
+        unsafe {
+            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
+        }
+        barrier(transfer, compute, &[buffer_barrier(list, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
+        // SAFETY: forwarded from the caller.
+        unsafe { fast.record_dispatch(cmd, binding.set.set, push, count) };
+        // The careful pass reads the list (as indirect arguments too) and writes
+        // the hits of the rays it lists, beside the fast pass's writes.
+        let list_args = buffer_barrier(list, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write);
+        barrier(compute, indirect, &[list_args, buffer_barrier(binding.hits, write, write)]);
+        // SAFETY: forwarded from the caller; the list holds the indirect arguments.
+        unsafe { careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0) };
     }
 
     /// The index of the pipeline of `traversal`, compiled on first use.
@@ -506,7 +601,7 @@ impl TwoLevelTracer {
         let index = match self.kernels.iter().position(|(k, _, _)| *k == key) {
             Some(i) => i,
             None => {
-                let general = compile(&self.ctx, key, false)?;
+                let general = compile(&self.ctx, key, false, PASS_ONE)?;
                 self.kernels.push((key, general, None));
                 self.kernels.len() - 1
             }
@@ -521,15 +616,28 @@ impl TwoLevelTracer {
         if !self.one_instance {
             return Ok(());
         }
+        let ctx = &self.ctx;
         for entry in self.kernels.iter_mut().filter(|e| e.2.is_none()) {
-            entry.2 = Some(compile(&self.ctx, entry.0, true)?);
+            let key = entry.0;
+            entry.2 = Some(if key.robust {
+                // The fast and the careful pass, compiled side by side.
+                let (main, careful) = std::thread::scope(|s| {
+                    let careful = s.spawn(|| compile(ctx, key, true, PASS_CAREFUL));
+                    let main = compile(ctx, key, true, PASS_FAST);
+                    (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+                });
+                OneInstance { main: main?, careful: Some(careful?) }
+            } else {
+                OneInstance { main: compile(ctx, key, true, PASS_ONE)?, careful: None }
+            });
         }
         Ok(())
     }
 }
 
-/// The two-level pipeline of `key` (normalized), for a scene of one instance or any.
-fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<Kernel> {
+/// The two-level pipeline of `key` (normalized) and `pass`, for a scene of one
+/// instance or any.
+fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool, pass: u32) -> Result<Kernel> {
     let spec = in_order::<_, { TRACE_SPECS as usize + 1 }>([
         (TRACE_SPEC_VARIANT, key.variant.id()),
         (TRACE_SPEC_COUNTERS, 0),
@@ -537,7 +645,7 @@ fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<
         (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
         (TRACE_SPEC_PACKET_WIDTH, 1),
         (TRACE_SPEC_ROBUST, key.robust as u32),
-        (TRACE_SPEC_PASS, PASS_ONE),
+        (TRACE_SPEC_PASS, pass),
         (TL_SPEC_ONE_INSTANCE, one_instance as u32),
     ]);
     Kernel::new(
@@ -549,19 +657,24 @@ fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<
             push_constant_size: std::mem::size_of::<TwoLevelParams>() as u32,
             spec_constants: &spec,
             workgroup_size: TRACE_WORKGROUP_SIZE,
+            // Every scene buffer is a texel buffer (see the kernel's bindings).
             texel_buffers: &[
                 (TL_BINDING_NODES, vk::Format::R32G32_UINT),
                 (TL_BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
+                (TL_BINDING_GEOMETRIES, vk::Format::R32G32B32A32_UINT),
+                (TL_BINDING_INSTANCES, vk::Format::R32G32B32A32_UINT),
+                (TL_BINDING_TOP, vk::Format::R32G32B32A32_UINT),
+                (TL_BINDING_ORDER, vk::Format::R32_UINT),
             ],
             ..Default::default()
         },
     )
 }
 
-/// Device-local buffers for `capacity` instances: instances, top-level nodes
-/// (fewer than 2 per instance) and the leaves' instance order.
+/// Device-local texel buffers for `capacity` instances: instances, top-level
+/// nodes (fewer than 2 per instance) and the leaves' instance order.
 fn instance_buffers(ctx: &Arc<GpuContext>, capacity: usize) -> Result<[Buffer; 3]> {
-    let usage = STORAGE | vk::BufferUsageFlags::TRANSFER_DST;
+    let usage = TEXEL | vk::BufferUsageFlags::TRANSFER_DST;
     let n = capacity as u64;
     let buffer = |bytes: u64, name: &str| Buffer::new(ctx, bytes, usage, MemoryLocation::GpuOnly, name);
     Ok([
