@@ -68,14 +68,9 @@ GpuGeometry load_geometry(uint g) {
     return GpuGeometry(uintBitsToFloat(a), uintBitsToFloat(b), c.x, c.y, c.z, c.w);
 }
 
-GpuInstance load_instance(uint i) {
-    int base = int(i) * 4;
-    vec4 r0 = uintBitsToFloat(imageLoad(instance_texels, base));
-    vec4 r1 = uintBitsToFloat(imageLoad(instance_texels, base + 1));
-    vec4 r2 = uintBitsToFloat(imageLoad(instance_texels, base + 2));
-    uvec4 d = imageLoad(instance_texels, base + 3);
-    return GpuInstance(r0, r1, r2, d.x, d.y, d.z, d.w);
-}
+// An instance's geometry, instance id, mask and identity flag (its matrix
+// rows are read by object_ray only where needed).
+uvec4 load_instance_ids(uint i) { return imageLoad(instance_texels, int(i) * 4 + 3); }
 
 TopNode load_top(uint n) {
     int base = int(n) * 3;
@@ -131,13 +126,14 @@ bool enters_box(vec3 lo, vec3 hi, float far_scale, float condition, vec3 o, vec3
     return t0 <= t1;
 }
 
-// The object ray of `inst` (CPU twin: `TwoLevelScene::object_ray`): each
-// component summed left to right, no fused multiply-add.
-Ray object_ray(GpuInstance inst, Ray ray) {
+// The object ray of instance `i` (CPU twin: `TwoLevelScene::object_ray`): each
+// component summed left to right, no fused multiply-add; the world ray itself
+// where the matrix is exactly the identity.
+Ray object_ray(uint i, bool identity, Ray ray) {
     Ray o = ray;
-    vec4 rows[3] = vec4[3](inst.row0, inst.row1, inst.row2);
+    if (identity) return o;
     [[unroll]] for (uint k = 0u; k < 3u; ++k) {
-        vec4 m = rows[k];
+        vec4 m = uintBitsToFloat(imageLoad(instance_texels, int(i) * 4 + int(k)));
         precise float p = ((m.x * ray.origin.x + m.y * ray.origin.y) + m.z * ray.origin.z) + m.w;
         precise float q = (m.x * ray.dir.x + m.y * ray.dir.y) + m.z * ray.dir.z;
         o.origin[k] = p;
@@ -210,10 +206,10 @@ Hit trace_instance(Ray ray, GpuGeometry g, out uint reference, out bool needs_ca
 // notes an instance cut short, `listed` one the fast pass leaves to the careful
 // pass. True when an any-hit trace is done.
 bool visit_instance(uint i, Ray ray, inout GpuInstanceHit best, inout bool incomplete, inout bool listed) {
-    GpuInstance inst = load_instance(i);
-    if ((inst.mask & params.mask) == 0u) return false;
-    GpuGeometry g = load_geometry(inst.geometry);
-    Ray object = object_ray(inst, ray);
+    uvec4 inst = load_instance_ids(i);  // geometry, instance id, mask, identity
+    if ((inst.z & params.mask) == 0u) return false;
+    GpuGeometry g = load_geometry(inst.x);
+    Ray object = object_ray(i, inst.w != 0u, ray);
     object.tmax = min(best.t, ray.tmax);
     uint reference;
     bool needs_careful;
@@ -228,7 +224,7 @@ bool visit_instance(uint i, Ray ray, inout GpuInstanceHit best, inout bool incom
         return false;
     }
     if (hit.t <= best.t || best.prim_index >= PRIM_INCOMPLETE) {
-        best = GpuInstanceHit(hit.t, hit.prim_id, hit.u, hit.v, inst.instance_id, g.id,
+        best = GpuInstanceHit(hit.t, hit.prim_id, hit.u, hit.v, inst.y, g.id,
                               front_facing(reference, traced_dir(object.dir)) ? 1u : 0u, i);
         return ANY_HIT;
     }
@@ -261,14 +257,12 @@ void trace_world(uint index) {
     stack[0] = 0u;
     uint sp = 1u;
     if (ONE_INSTANCE) {
-        // The top level is one leaf holding one instance: its box, then the
-        // instance, with no loop around the object-space traversal (lavapipe runs
-        // a loop's body under the loop's mask; see docs/EMBEDDING.md).
-        TopNode node = load_top(0u);
-        float entry;
-        if (enters_box(node.bounds_min.xyz, node.bounds_max.xyz, far_scale, node.bounds_min.w, o, d, inv, ray.tmin, ray.tmax, entry)) {
-            done = visit_instance(load_order(0u), ray, best, incomplete, listed);
-        }
+        // The top level is one leaf holding one instance: the instance, with no
+        // loop around the object-space traversal (lavapipe runs a loop's body
+        // under the loop's mask; see docs/EMBEDDING.md) and no test of its world
+        // box (the object ray's clip to the geometry's box decides as much; the
+        // CPU twin skips it too).
+        done = visit_instance(load_order(0u), ray, best, incomplete, listed);
         sp = 0u;
     } else while (sp > 0u && !done) {
         // Every pass pops one node, each pushed at most once: the loop ends, and

@@ -139,8 +139,9 @@ gpu_struct! {
         pub instance_id: u32,
         /// Its 8-bit visibility mask.
         pub mask: u32,
-        /// Padding (0).
-        pub pad: u32,
+        /// 1 when the world-to-object matrix is exactly the identity (the object
+        /// ray is then the world ray itself), else 0.
+        pub identity: u32,
     }
 }
 

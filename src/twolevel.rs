@@ -18,7 +18,9 @@
 //!   rounded to f32 once), each component summed left to right in f32 without
 //!   fused multiply-adds (the origin's translation added last, the direction's
 //!   three products only); `tmin`, `tmax` unchanged (the direction is not
-//!   normalized, so `t` is the world ray's parameter).
+//!   normalized, so `t` is the world ray's parameter). Where `W` is exactly the
+//!   identity, the object ray is the world ray itself, bit for bit (the sums
+//!   above would turn a `-0.0` component into `+0.0`).
 //! - **Each instance's answer is the robust traversal's for its object ray**:
 //!   exact for that ray (the guarantees of docs/ACCURACY.md, on the geometry's
 //!   own tree). Far-translated or badly conditioned transforms lose accuracy
@@ -364,6 +366,9 @@ impl TwoLevelScene {
     /// module docs' contract).
     pub fn object_ray(&self, index: usize, ray: &Ray) -> Ray {
         let m = &self.placed[index].to_object;
+        if is_identity(m) {
+            return *ray;
+        }
         let o = Vec3::from(ray.origin);
         let d = Vec3::from(ray.dir);
         let linear = |r: usize, v: Vec3| (m[r][0] * v.x + m[r][1] * v.y) + m[r][2] * v.z;
@@ -397,10 +402,13 @@ impl TwoLevelScene {
         };
         let mut incomplete = false;
         let mut stack = vec![0u32];
+        // One instance: its world box is not tested (the object ray's clip to the
+        // geometry's box decides as much), as in the kernel's one-instance pipeline.
+        let one_instance = self.placed.len() == 1;
         while let Some(n) = stack.pop() {
             let node = self.nodes[n as usize];
             let reach = best.t.min(ray.tmax);
-            if enters(n, reach).is_none() {
+            if !one_instance && enters(n, reach).is_none() {
                 continue;
             }
             if node.count == 0 {
@@ -607,6 +615,12 @@ fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact:
 mod gpu;
 pub use crate::abi::GpuInstanceHit;
 pub use gpu::{TwoLevelBinding, TwoLevelTracer};
+
+/// Whether a world-to-object matrix is exactly the identity (its object rays
+/// are the world rays themselves).
+pub(crate) fn is_identity(m: &[[f32; 4]; 3]) -> bool {
+    *m == [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]
+}
 
 #[cfg(test)]
 mod tests;

@@ -412,6 +412,13 @@ fn two_level_edge_cases_match_the_cpu_twin() {
     let mut rng = common::Rng(5);
     let mut rays = common::random_rays(&mut rng, Vec3::splat(-2.0), Vec3::splat(5.0), 300);
     rays.push(Ray::new(Vec3::new(-10.0, 0.0, 0.0), Vec3::X, 0.0, 1.0));
+    // Signed zeros: an identity instance (`place(_, 0.0)`) traces the world ray
+    // itself, -0.0 components kept.
+    for k in 0..8 {
+        let z = |bit: usize| if k & bit != 0 { -0.0 } else { 0.0 };
+        rays.push(Ray::new(Vec3::new(z(1), z(2), -4.0), Vec3::new(z(4), z(1), 1.0), 0.0, f32::INFINITY));
+        rays.push(Ray::new(Vec3::new(-4.0, 0.1, z(2)), Vec3::new(1.0, z(4), z(1)), 0.0, f32::INFINITY));
+    }
     let place = |geometry: usize, x: f32| Instance {
         geometry,
         transform: Affine3A::from_translation(Vec3::X * x),

@@ -309,7 +309,7 @@ impl TwoLevelTracer {
                 geometry: p.instance.geometry as u32,
                 instance_id: p.instance.instance_id,
                 mask: u32::from(p.instance.mask),
-                pad: 0,
+                identity: super::is_identity(&p.to_object) as u32,
             })
             .collect();
         let top = scene

@@ -251,9 +251,21 @@ fn an_identity_instance_is_the_single_level_trace() {
     .unwrap();
     let mut rng = Rng(8);
     let view = SceneRef::new(&single, &tris);
-    for _ in 0..500 {
-        let origin = rng.unit() * 3.0;
-        let ray = Ray::new(origin, rng.unit() - origin * 0.3, 0.0, f32::INFINITY);
+    // Random rays, then rays with -0.0 components (the object ray is the world
+    // ray itself, bit for bit).
+    let signed_zeros = (0..16).map(|k: u32| {
+        let z = |bit: u32| if k & bit != 0 { -0.0 } else { 0.0 };
+        Ray::new(Vec3::new(z(1), z(2), -3.0), Vec3::new(z(4), z(8), 1.0), 0.0, f32::INFINITY)
+    });
+    let random: Vec<Ray> = (0..500)
+        .map(|_| {
+            let origin = rng.unit() * 3.0;
+            Ray::new(origin, rng.unit() - origin * 0.3, 0.0, f32::INFINITY)
+        })
+        .collect();
+    for ray in random.into_iter().chain(signed_zeros) {
+        let object = scene.object_ray(0, &ray);
+        assert_eq!(bytemuck::bytes_of(&object), bytemuck::bytes_of(&ray));
         let (h, _) = trace_ray(&view, &ray, Traversal::closest(Variant::Stack));
         let i = scene.trace(&ray, 1, Traversal::closest(Variant::Stack));
         assert_eq!(
