@@ -8,10 +8,10 @@
 //
 // Every geometry's nodes and triangle references share one texel buffer each;
 // `node_base` and `texel_base` (GEOMETRY_BASES in node.glsl and leaf.glsl) say
-// where the instance being traced starts. Robust instances trace carefully in
-// one pass (PASS_ONE), except in a scene of one instance (ONE_INSTANCE): there,
-// as in trace.comp, a fast pass lists the rays it cannot decide in f32 and a
-// careful pass (dispatched indirectly) traces them.
+// where the instance being traced starts. Robust rays trace as in trace.comp: a
+// fast pass (PASS_FAST) lists the rays it cannot decide in f32 (a ray is listed
+// whole: the careful pass traces every instance again), and a careful pass
+// (PASS_CAREFUL, dispatched indirectly) traces them.
 
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require

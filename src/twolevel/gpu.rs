@@ -34,11 +34,10 @@ use crate::traversal::{Traversal, Variant};
 /// [`TwoLevelTracer::record_binding`] under the contract of
 /// [`crate::trace::Tracer::record_trace`]: make your ray writes visible to
 /// `COMPUTE_SHADER` reads before, and the hits to their reader after; the
-/// recording binds kdtrace's pipeline, set 0 and push constants. One dispatch;
-/// a robust trace of a scene of one instance records two, as `Tracer` does (a
-/// fast pass, and an indirect careful pass over the rays it listed), with
-/// kdtrace's own buffer barriers on the binding's list and your hit range
-/// between them.
+/// recording binds kdtrace's pipeline, set 0 and push constants. A plain trace
+/// is one dispatch; a robust trace records two, as `Tracer` does (a fast pass,
+/// and an indirect careful pass over the rays it listed), with kdtrace's own
+/// buffer barriers on the binding's list and your hit range between them.
 pub struct TwoLevelTracer {
     ctx: Arc<GpuContext>,
     nodes: Buffer,
@@ -56,7 +55,7 @@ pub struct TwoLevelTracer {
     generation: u64,
     /// Pipelines by traversal, compiled on first use: the general one, and while
     /// the scene has one instance those without a top-level loop.
-    kernels: Vec<(Traversal, Kernel, Option<OneInstance>)>,
+    kernels: Vec<(Traversal, Passes, Option<Passes>)>,
     /// The scene has exactly one instance.
     one_instance: bool,
     /// Buffers a recorded update replaced or staged through, each under the
@@ -64,12 +63,9 @@ pub struct TwoLevelTracer {
     retired: Vec<(u64, Buffer)>,
 }
 
-/// The pipelines of a scene of one instance (no top-level loop): one pass, or
-/// for robust traces a fast pass and a careful pass over the rays it lists.
-/// Measured on lavapipe, one identity instance of the bunny (19,200 camera
-/// rays): 42.0 M instructions in one careful pass against 38.0 M in two (see
-/// docs/EMBEDDING.md); with the top-level loop a split measured no faster.
-struct OneInstance {
+/// The pipelines of one traversal: one pass, or for robust traces a fast pass
+/// and a careful pass over the rays it lists (as `Tracer`'s).
+struct Passes {
     main: Kernel,
     careful: Option<Kernel>,
 }
@@ -468,8 +464,8 @@ impl TwoLevelTracer {
         }
         let kernel = self.kernel(traversal)?;
         let capacity = (rays.range / RAY_BYTES).min(hits.range / HIT_BYTES).min(u64::from(u32::MAX)) as u32;
-        // Robust traces of one instance list rays for the careful pass; the others
-        // bind a list they never touch.
+        // Robust traces list rays for the careful pass; plain ones bind a list
+        // they never touch.
         let words = CAREFUL_HEADER_WORDS as u64 + if traversal.robust { u64::from(capacity) } else { 0 };
         let usage = STORAGE | vk::BufferUsageFlags::INDIRECT_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
         let list = Buffer::new(&self.ctx, words * 4, usage, MemoryLocation::GpuOnly, "two-level careful list")?;
@@ -487,14 +483,14 @@ impl TwoLevelTracer {
         }
         ranges[TL_BINDING_HITS as usize] = hits;
         // SAFETY: the scene buffers and the list are this tracer's; the caller vouches for the rest.
-        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1, &ranges)? };
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1.main, &ranges)? };
         Ok(TwoLevelBinding { set, list, hits, kernel, generation: self.generation, capacity })
     }
 
     /// Records into `cmd` the two-level trace of the first `count` rays of
     /// `binding`'s ray range, visible to the instances whose mask shares a bit
-    /// with `mask`: one dispatch, or two for a robust trace of one instance (see
-    /// the type docs); nothing for `count` 0.
+    /// with `mask`: one dispatch, or two for a robust trace (see the type docs);
+    /// nothing for `count` 0.
     ///
     /// Errors: `Error::InvalidInput` for a binding made before the instance
     /// buffers were reallocated, or more rays than its ranges hold.
@@ -522,22 +518,22 @@ impl TwoLevelTracer {
             let params =
                 TwoLevelParams { ray_count: count, mask: u32::from(mask), top_nodes: self.top_node_count, pad: 0 };
             let push = bytemuck::bytes_of(&params);
-            let (_, general, one) = &self.kernels[binding.kernel];
+            let passes = match &self.kernels[binding.kernel] {
+                (_, _, Some(one)) if self.one_instance => one,
+                (_, general, _) => general,
+            };
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
             unsafe {
-                match one {
-                    Some(OneInstance { main, careful: Some(careful) }) if self.one_instance => {
-                        self.record_two_passes(cmd, binding, main, careful, push, count)
-                    }
-                    Some(one) if self.one_instance => one.main.record_dispatch(cmd, binding.set.set, push, count),
-                    _ => general.record_dispatch(cmd, binding.set.set, push, count),
+                match &passes.careful {
+                    Some(careful) => self.record_two_passes(cmd, binding, &passes.main, careful, push, count),
+                    None => passes.main.record_dispatch(cmd, binding.set.set, push, count),
                 }
             }
         }
         Ok(())
     }
 
-    /// Records a robust one-instance trace: the list emptied, the fast pass, the
+    /// Records a robust trace: the list emptied, the fast pass, the
     /// careful pass over the rays it listed (indirect), with kdtrace's own buffer
     /// barriers on the list and the hit range (as `Tracer`'s two passes).
     ///
@@ -601,7 +597,7 @@ impl TwoLevelTracer {
         let index = match self.kernels.iter().position(|(k, _, _)| *k == key) {
             Some(i) => i,
             None => {
-                let general = compile(&self.ctx, key, false, PASS_ONE)?;
+                let general = compile_passes(&self.ctx, key, false)?;
                 self.kernels.push((key, general, None));
                 self.kernels.len() - 1
             }
@@ -616,23 +612,25 @@ impl TwoLevelTracer {
         if !self.one_instance {
             return Ok(());
         }
-        let ctx = &self.ctx;
         for entry in self.kernels.iter_mut().filter(|e| e.2.is_none()) {
-            let key = entry.0;
-            entry.2 = Some(if key.robust {
-                // The fast and the careful pass, compiled side by side.
-                let (main, careful) = std::thread::scope(|s| {
-                    let careful = s.spawn(|| compile(ctx, key, true, PASS_CAREFUL));
-                    let main = compile(ctx, key, true, PASS_FAST);
-                    (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-                });
-                OneInstance { main: main?, careful: Some(careful?) }
-            } else {
-                OneInstance { main: compile(ctx, key, true, PASS_ONE)?, careful: None }
-            });
+            entry.2 = Some(compile_passes(&self.ctx, entry.0, true)?);
         }
         Ok(())
     }
+}
+
+/// The pipelines of `key` (normalized) for a scene of one instance or any: for
+/// robust traces the fast and the careful pass, compiled side by side.
+fn compile_passes(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<Passes> {
+    if !key.robust {
+        return Ok(Passes { main: compile(ctx, key, one_instance, PASS_ONE)?, careful: None });
+    }
+    let (main, careful) = std::thread::scope(|s| {
+        let careful = s.spawn(|| compile(ctx, key, one_instance, PASS_CAREFUL));
+        let main = compile(ctx, key, one_instance, PASS_FAST);
+        (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+    });
+    Ok(Passes { main: main?, careful: Some(careful?) })
 }
 
 /// The two-level pipeline of `key` (normalized) and `pass`, for a scene of one
