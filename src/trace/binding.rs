@@ -66,6 +66,59 @@ pub(crate) fn buffer_barrier(
         .size(range.range)
 }
 
+/// Records a robust trace's two passes over descriptor set `set` (both kernels
+/// share its layout): the careful list emptied (indirect arguments 0, 1, 1;
+/// count 0) once an earlier recording's passes are done with it, the fast pass
+/// over `count` rays, then the careful pass dispatched indirectly over the rays
+/// it listed. Every barrier is a buffer barrier on `list` or on the `rewritten`
+/// ranges the careful pass writes again after the fast one (hits, counters),
+/// never a global one. Used by `Tracer` and the two-level tracer.
+///
+/// # Safety
+/// `cmd` is recording, outside a render pass, on a compute queue of `device`;
+/// the kernels, `set` and the buffers live until it completes; `list` holds
+/// the header and one word per listed ray.
+#[allow(clippy::too_many_arguments)]
+pub(crate) unsafe fn record_fast_then_careful(
+    device: &ash::Device,
+    cmd: vk::CommandBuffer,
+    set: vk::DescriptorSet,
+    push: &[u8],
+    count: u32,
+    [fast, careful]: [&Kernel; 2],
+    list: &Buffer,
+    rewritten: &[BufferRange],
+) {
+    let barrier = |src: vk::PipelineStageFlags, dst: vk::PipelineStageFlags, buffers: &[vk::BufferMemoryBarrier]| {
+        // SAFETY: `cmd` is recording and the buffers live (the caller's contract).
+        unsafe { device.cmd_pipeline_barrier(cmd, src, dst, vk::DependencyFlags::empty(), &[], buffers, &[]) };
+    };
+    let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
+    let (write, read_write) =
+        (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+    let range = BufferRange::whole(list);
+    // A memory dependency before the reset, since the kernels' binding of the
+    // list is writable (synchronization validation counts the careful pass's
+    // use as a write).
+    let indirect = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
+    barrier(indirect, transfer, &[buffer_barrier(range, write, vk::AccessFlags::TRANSFER_WRITE)]);
+    let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
+    // SAFETY: the caller's contract; the list holds at least the header.
+    unsafe { device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty)) };
+    barrier(transfer, compute, &[buffer_barrier(range, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
+    // SAFETY: the caller's contract.
+    unsafe { fast.record_dispatch(cmd, set, push, count) };
+    // The careful pass reads the list (as indirect arguments too) and rewrites
+    // ranges the fast pass has just written: kdtrace's own writes of the
+    // caller's ranges (any access of the caller's before the fast pass was
+    // checked there).
+    let mut barriers = vec![buffer_barrier(range, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write)];
+    barriers.extend(rewritten.iter().map(|&r| buffer_barrier(r, write, write)));
+    barrier(compute, indirect, &barriers);
+    // SAFETY: the caller's contract; the list holds the indirect arguments.
+    unsafe { careful.record_dispatch_indirect(cmd, set, push, list.buffer, 0) };
+}
+
 /// The ordering dispatches of a binding (`RayOrder::Coherent`).
 pub(super) struct OrderPass {
     pub(super) kernels: Arc<[Kernel; 3]>,
@@ -389,25 +442,17 @@ impl Tracer {
                 kernels.main.record_dispatch(cmd, binding.set.set, push, count);
                 return;
             };
-            let list = BufferRange::whole(list_buffer);
-            // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
-            // recording's passes are done with it: a memory dependency, since the
-            // kernel's binding of the list is writable (synchronization validation
-            // counts the careful pass's use as a write).
-            let stage = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
-            barrier(stage, transfer, &[buffer_barrier(list, write, vk::AccessFlags::TRANSFER_WRITE)]);
-            let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
-            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
-            barrier(transfer, compute, &[buffer_barrier(list, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
-            kernels.main.record_dispatch(cmd, binding.set.set, push, count);
-            // The careful pass reads the list (as indirect arguments too) and
-            // rewrites the hits (and counters) of the rays it lists, which the fast
-            // pass has written: kdtrace's own writes of the caller's ranges (any
-            // access of the caller's before the fast pass was checked there).
-            let list_args = buffer_barrier(list, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write);
-            let hits = buffer_barrier(binding.hits, write, write);
-            barrier(compute, stage, &[list_args, hits, buffer_barrier(binding.counters, write, write)]);
-            careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0);
+            let rewritten = [binding.hits, binding.counters];
+            record_fast_then_careful(
+                device,
+                cmd,
+                binding.set.set,
+                push,
+                count,
+                [&kernels.main, careful],
+                list_buffer,
+                &rewritten,
+            );
         }
     }
 

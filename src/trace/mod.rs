@@ -141,8 +141,8 @@ mod options;
 mod pipelines;
 pub(crate) mod scene;
 
-pub(crate) use binding::buffer_barrier;
 pub use binding::TraceBinding;
+pub(crate) use binding::{buffer_barrier, record_fast_then_careful};
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES};
 use pipelines::TraceKernels;

@@ -22,7 +22,7 @@ use crate::consts::{
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::trace::buffer_barrier;
+use crate::trace::{buffer_barrier, record_fast_then_careful};
 use crate::traversal::{Traversal, Variant};
 
 /// A [`TwoLevelScene`] on a device. Geometries are uploaded once;
@@ -525,57 +525,21 @@ impl TwoLevelTracer {
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
             unsafe {
                 match &passes.careful {
-                    Some(careful) => self.record_two_passes(cmd, binding, &passes.main, careful, push, count),
+                    Some(careful) => record_fast_then_careful(
+                        &self.ctx.device,
+                        cmd,
+                        binding.set.set,
+                        push,
+                        count,
+                        [&passes.main, careful],
+                        &binding.list,
+                        &[binding.hits],
+                    ),
                     None => passes.main.record_dispatch(cmd, binding.set.set, push, count),
                 }
             }
         }
         Ok(())
-    }
-
-    /// Records a robust trace: the list emptied, the fast pass, the
-    /// careful pass over the rays it listed (indirect), with kdtrace's own buffer
-    /// barriers on the list and the hit range (as `Tracer`'s two passes).
-    ///
-    /// # Safety
-    /// As [`TwoLevelTracer::record_binding`].
-    unsafe fn record_two_passes(
-        &self,
-        cmd: vk::CommandBuffer,
-        binding: &TwoLevelBinding,
-        fast: &Kernel,
-        careful: &Kernel,
-        push: &[u8],
-        count: u32,
-    ) {
-        let device = &self.ctx.device;
-        let barrier =
-            |src: vk::PipelineStageFlags, dst: vk::PipelineStageFlags, buffers: &[vk::BufferMemoryBarrier]| {
-                // SAFETY: `cmd` is recording (the caller's contract); the buffers are live.
-                unsafe { device.cmd_pipeline_barrier(cmd, src, dst, vk::DependencyFlags::empty(), &[], buffers, &[]) };
-            };
-        let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
-        let (write, read_write) =
-            (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
-        let list = BufferRange::whole(&binding.list);
-        // Empty the list (indirect arguments 0, 1, 1; count 0) once an earlier
-        // recording's passes are done with it.
-        let indirect = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
-        barrier(indirect, transfer, &[buffer_barrier(list, write, vk::AccessFlags::TRANSFER_WRITE)]);
-        let empty: [u32; CAREFUL_HEADER_WORDS as usize] = [0, 1, 1, 0];
-        // SAFETY: as above; the list holds at least the header.
-        unsafe {
-            device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty));
-        }
-        barrier(transfer, compute, &[buffer_barrier(list, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
-        // SAFETY: forwarded from the caller.
-        unsafe { fast.record_dispatch(cmd, binding.set.set, push, count) };
-        // The careful pass reads the list (as indirect arguments too) and writes
-        // the hits of the rays it lists, beside the fast pass's writes.
-        let list_args = buffer_barrier(list, write, vk::AccessFlags::INDIRECT_COMMAND_READ | read_write);
-        barrier(compute, indirect, &[list_args, buffer_barrier(binding.hits, write, write)]);
-        // SAFETY: forwarded from the caller; the list holds the indirect arguments.
-        unsafe { careful.record_dispatch_indirect(cmd, binding.set.set, push, list.buffer, 0) };
     }
 
     /// The index of the pipeline of `traversal`, compiled on first use.
