@@ -28,8 +28,12 @@ layout(std430, set = 0, binding = ORDER_BINDING_RAYS) readonly buffer Rays { uve
 layout(std430, set = 0, binding = ORDER_BINDING_BUCKETS) buffer Buckets { uint buckets[]; };
 // The ray indices in the coherent order.
 layout(std430, set = 0, binding = ORDER_BINDING_LIST) writeonly buffer List { uint list[]; };
+// A device-counted batch's arguments, when params.indirect (glsl/indirect_args.comp).
+layout(std430, set = 0, binding = ORDER_BINDING_INDIRECT) readonly buffer Indirect { uint indirect_words[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
+
+#include "batch.glsl"
 
 // The 3 low bits of x spread to every third bit (x < 2^ORDER_CELL_BITS).
 uint spread3(uint x) {
@@ -73,8 +77,8 @@ void main() {
         }
         return;
     }
-    uint index = gl_GlobalInvocationID.x;
-    if (index >= params.ray_count) return;
+    uint index = batch_slot(ORDER_WORKGROUP_SIZE);
+    if (index >= batch_count()) return;
     uint key = ray_key(index);
     if (STEP == ORDER_STEP_COUNT) {
         atomicAdd(buckets[key], 1u);

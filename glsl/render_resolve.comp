@@ -22,7 +22,8 @@ layout(push_constant) uniform Params { RenderParams p; };
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    if (i >= p.count) return;
+    uint block = wave_block(p.count);
+    if (i >= WAVE_PATHS(p.count, block)) return;
     uvec2 span = spans[i];
     if (span.y == 0u) return;
     vec3 sum = vec3(0.0);
@@ -35,7 +36,7 @@ void main() {
             incomplete++;
         }
     }
-    if (incomplete > 0u) atomicAdd(counters[RC_BAD_RAYS], incomplete);
+    if (incomplete > 0u) atomicAdd(counters[block + RC_BAD_RAYS], incomplete);
     uint pixel = paths[i].pixel;
     accum[pixel] += vec4(sum, float(incomplete));  // w counts the pixel's bad rays
 }

@@ -180,7 +180,10 @@ void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool
         go = true;
     }
     if (go && luminance(next.throughput) > 0.0) {
-        uint slot = atomicAdd(counters[RC_NEXT], 1u);
+        uint block = wave_block(p.count);
+        uint slot = atomicAdd(counters[block + RC_NEXT], 1u);
+        // Grow the next wave's indirect dispatch by a workgroup when one begins.
+        if (slot % RENDER_WORKGROUP_SIZE == 0u) atomicAdd(counters[block + RC_ARGS], 1u);
         rays_next[slot] = Ray(v.origin, 0.0, dir, INF);
         paths_next[slot] = next;
     }
@@ -248,7 +251,8 @@ void write_shadow_rays(uint first, Vertex v, Path path, vec3 area_weight, vec3 a
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    if (i >= p.count) return;
+    uint block = wave_block(p.count);
+    if (i >= WAVE_PATHS(p.count, block)) return;
     Path path = paths_in[i];
     Hit hit = hits_in[i];
     spans[i] = uvec2(0u);
@@ -257,7 +261,7 @@ void main() {
         if (hit.prim_id == PRIM_MISS) {
             accum[path.pixel] += vec4(path.throughput * p.background.xyz, 0.0);
         } else {
-            atomicAdd(counters[RC_BAD_RAYS], 1u);
+            atomicAdd(counters[block + RC_BAD_RAYS], 1u);
             accum[path.pixel] += vec4(0.0, 0.0, 0.0, 1.0);  // w counts the pixel's bad rays
         }
         return;
@@ -307,9 +311,9 @@ void main() {
     if (head_ray) shadow_count++;
 
     if (shadow_count > 0u) {
-        uint first = atomicAdd(counters[RC_SHADOW], shadow_count);
+        uint first = atomicAdd(counters[block + RC_SHADOW], shadow_count);
         if (first + shadow_count > p.shadow_capacity) {
-            atomicAdd(counters[RC_OVERFLOW], shadow_count);
+            atomicAdd(counters[block + RC_OVERFLOW], shadow_count);
         } else {
             spans[i] = uvec2(first, shadow_count);
             write_shadow_rays(first, v, path, area_weight, area_target, lit, head_ray, head, gather_ao);

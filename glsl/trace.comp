@@ -57,8 +57,12 @@ layout(std430, set = 0, binding = BINDING_ROPES) readonly buffer Ropes { uint ro
 layout(std430, set = 0, binding = BINDING_CAREFUL) coherent buffer Careful { uint careful[]; };
 // The coherent order of the batch, when params.ordered (glsl/order_rays.comp).
 layout(std430, set = 0, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
+// A device-counted batch's arguments, when params.indirect (glsl/indirect_args.comp).
+layout(std430, set = 0, binding = BINDING_INDIRECT) readonly buffer Indirect { uint indirect_words[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
+
+#include "batch.glsl"
 
 const float FLT_MIN_NORMAL = 1.17549435e-38;
 const float FLT_MAX = 3.40282347e38;
@@ -193,8 +197,8 @@ void main() {
     // every ray dearer). The careful pass takes the listed rays, in rows of
     // CAREFUL_MAX_GROUPS workgroups.
     bool listed = PASS == PASS_CAREFUL;
-    uint id = listed ? careful_slot() : gl_GlobalInvocationID.x;
-    uint count = listed ? careful[3] : params.ray_count;
+    uint id = listed ? careful_slot() : batch_slot(TRACE_WORKGROUP_SIZE);
+    uint count = listed ? careful[3] : batch_count();
     if (id >= count) return;
     // The careful pass lists ray indices; an ordered batch traces ray order[id].
     trace_ray(listed ? careful[CAREFUL_HEADER_WORDS + id] : (params.ordered != 0u ? order[id] : id));

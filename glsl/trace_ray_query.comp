@@ -28,8 +28,12 @@ layout(set = 0, binding = RQ_BINDING_SCENE) uniform accelerationStructureEXT sce
 layout(std430, set = 0, binding = RQ_BINDING_PRIM_IDS) readonly buffer PrimIds { uint prim_ids[]; };
 layout(std430, set = 0, binding = RQ_BINDING_RAYS) readonly buffer Rays { Ray rays[]; };
 layout(std430, set = 0, binding = RQ_BINDING_HITS) writeonly buffer Hits { Hit hits[]; };
+// A device-counted batch's arguments, when params.indirect (glsl/indirect_args.comp).
+layout(std430, set = 0, binding = RQ_BINDING_INDIRECT) readonly buffer Indirect { uint indirect_words[]; };
 
 layout(push_constant) uniform Push { TraceParams params; };
+
+#include "batch.glsl"
 
 #define INF uintBitsToFloat(0x7f800000u)
 #define NAN uintBitsToFloat(0x7fc00000u)
@@ -112,8 +116,8 @@ Hit trace_query(Ray ray) {
 }
 
 void main() {
-    uint index = gl_GlobalInvocationID.x;
-    if (index >= params.ray_count) return;
+    uint index = batch_slot(TRACE_WORKGROUP_SIZE);
+    if (index >= batch_count()) return;
     Ray ray = rays[index];
     ray.dir = traced_dir(ray.dir);
     Hit hit;

@@ -60,8 +60,10 @@ gpu_struct! {
         /// 1: invocation `i` traces ray `order[i]` of the order binding
         /// (`RayOrder::Coherent`); 0: ray `i`.
         pub ordered: u32,
-        /// Padding to 48 bytes (0).
-        pub pad2: u32,
+        /// 1: the count is the `INDIRECT_COUNT` word of the indirect binding and
+        /// the dispatch covers it in rows (`Tracer::record_binding_indirect`);
+        /// 0: `ray_count`.
+        pub indirect: u32,
     }
 }
 

@@ -109,8 +109,11 @@ pub const BINDING_CAREFUL: u32 = 9;
 /// dummy unless `TraceParams::ordered`): the trace kernel's invocation `i` traces
 /// ray `order[i]`.
 pub const BINDING_ORDER: u32 = 10;
+/// Binding of a device-counted trace's arguments (`INDIRECT_WORDS` `u32`, read-only;
+/// a dummy unless `TraceParams::indirect`): the count at `INDIRECT_COUNT`.
+pub const BINDING_INDIRECT: u32 = 11;
 /// Number of bindings of the trace kernel.
-pub const TRACE_BINDINGS: u32 = 11;
+pub const TRACE_BINDINGS: u32 = 12;
 
 // Descriptor bindings of the two-level kernel (glsl/trace_twolevel.comp, set 0).
 /// Binding of every geometry's kd-tree nodes, one after another (texels as `BINDING_NODES`).
@@ -160,8 +163,10 @@ pub const ORDER_BINDING_RAYS: u32 = 0;
 pub const ORDER_BINDING_BUCKETS: u32 = 1;
 /// Binding of the order it writes (`u32` per ray).
 pub const ORDER_BINDING_LIST: u32 = 2;
+/// Binding of a device-counted trace's arguments (as `BINDING_INDIRECT`).
+pub const ORDER_BINDING_INDIRECT: u32 = 3;
 /// Number of bindings of the ordering kernel.
-pub const ORDER_BINDINGS: u32 = 3;
+pub const ORDER_BINDINGS: u32 = 4;
 // Descriptor bindings of the ray-query kernel (`glsl/trace_ray_query.comp`, set 0).
 /// Binding of the driver's top-level acceleration structure over the scene.
 pub const RQ_BINDING_SCENE: u32 = 0;
@@ -171,8 +176,26 @@ pub const RQ_BINDING_PRIM_IDS: u32 = 1;
 pub const RQ_BINDING_RAYS: u32 = 2;
 /// Binding of the output hits (16-byte std430 `Hit`s, write-only).
 pub const RQ_BINDING_HITS: u32 = 3;
+/// Binding of a device-counted trace's arguments (as `BINDING_INDIRECT`).
+pub const RQ_BINDING_INDIRECT: u32 = 4;
 /// Number of bindings of the ray-query kernel.
-pub const RQ_BINDINGS: u32 = 4;
+pub const RQ_BINDINGS: u32 = 5;
+
+// Device-counted traces (`Tracer::record_binding_indirect`, glsl/indirect_args.comp):
+// a one-invocation kernel turns the caller's count into a binding's arguments.
+/// `u32` words of a binding's arguments: the trace kernel's dispatch (x, y, z),
+/// the count, the ordering kernel's dispatch (x, y, z), padding.
+pub const INDIRECT_WORDS: u32 = 8;
+/// Word of the count (at most the binding's capacity) in a binding's arguments.
+pub const INDIRECT_COUNT: u32 = 3;
+/// Word of the ordering kernel's dispatch arguments in a binding's arguments.
+pub const INDIRECT_ORDER_ARGS: u32 = 4;
+/// Binding of the arguments kernel's source: the caller's counts (`u32`, read-only).
+pub const ARGS_BINDING_SOURCE: u32 = 0;
+/// Binding of the arguments kernel's output: the binding's arguments.
+pub const ARGS_BINDING_ARGS: u32 = 1;
+/// Number of bindings of the arguments kernel.
+pub const ARGS_BINDINGS: u32 = 2;
 /// Words before the ray indices in the careful-pass list.
 pub const CAREFUL_HEADER_WORDS: u32 = 4;
 /// Workgroups per row (x) of the careful pass's indirect dispatch: Vulkan's
@@ -268,6 +291,14 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("BINDING_NODE_BOXES", BINDING_NODE_BOXES),
     ("BINDING_ROPES", BINDING_ROPES),
     ("BINDING_ORDER", BINDING_ORDER),
+    ("BINDING_INDIRECT", BINDING_INDIRECT),
+    ("ORDER_BINDING_INDIRECT", ORDER_BINDING_INDIRECT),
+    ("RQ_BINDING_INDIRECT", RQ_BINDING_INDIRECT),
+    ("INDIRECT_WORDS", INDIRECT_WORDS),
+    ("INDIRECT_COUNT", INDIRECT_COUNT),
+    ("INDIRECT_ORDER_ARGS", INDIRECT_ORDER_ARGS),
+    ("ARGS_BINDING_SOURCE", ARGS_BINDING_SOURCE),
+    ("ARGS_BINDING_ARGS", ARGS_BINDING_ARGS),
     ("TL_BINDING_NODES", TL_BINDING_NODES),
     ("TL_BINDING_TRIANGLES", TL_BINDING_TRIANGLES),
     ("TL_BINDING_RAYS", TL_BINDING_RAYS),

@@ -213,6 +213,10 @@ impl Ranges {
         }
     }
 
+    fn set_hits(&mut self, hits: &[Hit]) {
+        self.output.write(0, bytemuck::cast_slice(hits)).unwrap();
+    }
+
     fn hits(&self, count: usize) -> Vec<Hit> {
         bytemuck::cast_slice(self.output.read(0, 16 * count).unwrap()).to_vec()
     }
@@ -297,6 +301,58 @@ fn recorded_traces_equal_trace() {
     assert!(same_bits(&ranges.hits(n), &expected.hits));
     drop(binding);
     drop((tracer, ranges));
+    assert_validation_clean(&ctx);
+}
+
+#[test]
+fn device_counted_traces_equal_host_counted_ones() {
+    let ctx = context();
+    let (scene, tree) = load("cornell_box.obj");
+    let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    let camera = Camera::from_cameras_json(&scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
+    let mut rays = camera_rays(&camera, 24, 16);
+    rays.extend(random_rays(&mut Rng(11), scene.bounds.min, scene.bounds.max, 300));
+    let n = rays.len() as u32;
+    let mut ranges = Ranges::new(&ctx, &rays);
+    // The counts as a pass on the device would leave them: a third, all, more
+    // than the binding holds (clamped), none; at an offset in the buffer.
+    let counts_words = [7, 7, 7, 7, n / 3, n, n + 1000, 0];
+    let mut counts =
+        Buffer::new(&ctx, 64, vk::BufferUsageFlags::STORAGE_BUFFER, MemoryLocation::CpuToGpu, "counts").unwrap();
+    counts.write(0, bytemuck::cast_slice(&counts_words)).unwrap();
+    let counts_range = BufferRange::new(counts.buffer, 16, 16);
+    let unset = Hit { t: -1.0, prim_id: 0xdead, u: 0.0, v: 0.0 };
+    let variants = [
+        TraceOptions::default(),
+        TraceOptions {
+            order: RayOrder::Coherent,
+            ..TraceOptions::new(Traversal { any_hit: true, ..Traversal::closest(Variant::Stack) })
+        },
+        TraceOptions::new(Traversal { robust: false, ..Traversal::closest(Variant::ShortStack) }),
+        TraceOptions::new(Traversal { packet_width: 4, ..Traversal::closest(Variant::Stack) }),
+    ];
+    for options in &variants {
+        let expected = tracer.trace(&rays, options).unwrap();
+        // SAFETY: the ranges are live storage buffers of this device; the binding
+        // and its buffers outlive every waited submission below.
+        let binding = unsafe { tracer.bind_indirect(ranges.rays, ranges.hits, None, counts_range, options) }.unwrap();
+        for word in 0..4 {
+            let count = counts_words[word as usize + 4].min(n) as usize;
+            ranges.set_hits(&vec![unset; n as usize]);
+            // SAFETY: as above.
+            submit(&ctx, |cmd| unsafe { tracer.record_binding_indirect(cmd, &binding, word) }).unwrap();
+            let hits = ranges.hits(n as usize);
+            assert!(same_bits(&hits[..count], &expected.hits[..count]), "{options:?}: count word {word}");
+            assert!(hits[count..].iter().all(|h| h.prim_id == 0xdead), "{options:?}: rays past the count {count}");
+        }
+        // SAFETY: nothing is recorded when it fails.
+        invalid(submit(&ctx, |cmd| unsafe { tracer.record_binding_indirect(cmd, &binding, 4) }), "past");
+        // SAFETY: as above.
+        let host_counted = unsafe { tracer.bind(ranges.rays, ranges.hits, None, options) }.unwrap();
+        // SAFETY: nothing is recorded when it fails.
+        invalid(submit(&ctx, |cmd| unsafe { tracer.record_binding_indirect(cmd, &host_counted, 0) }), "bind_indirect");
+    }
+    drop((tracer, ranges, counts));
     assert_validation_clean(&ctx);
 }
 

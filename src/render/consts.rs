@@ -27,7 +27,9 @@ pub const EMITTER_PARALLELOGRAM: u32 = 1 << 31;
 /// Where the corner vertex (0..=2) of a parallelogram emitter sits in `Emitter.prim`.
 pub const EMITTER_CORNER_SHIFT: u32 = 29;
 
-// Indices of the render counters buffer (`u32` each).
+// The render counters buffer: one block of `RC_STRIDE` `u32` per wave of a
+// sample (wave 0: the camera rays' shading; wave w: the shading of the paths
+// wave w - 1 appended), indexed within the block by `RC_*`.
 /// Paths appended to the next queue.
 pub const RC_NEXT: u32 = 0;
 /// Shadow rays appended.
@@ -38,8 +40,15 @@ pub const RC_BAD_RAYS: u32 = 2;
 pub const RC_OVERFLOW: u32 = 3;
 /// Rasterized first hits the ray test put just outside their triangle.
 pub const RC_RASTER_EDGE: u32 = 4;
-/// Number of render counters.
-pub const RC_COUNT: u32 = 5;
+/// The indirect dispatch arguments (x, y, z; x grown by the shade pass as it
+/// appends) of the render kernels over the paths appended.
+pub const RC_ARGS: u32 = 5;
+/// Words per wave in the render counters buffer.
+pub const RC_STRIDE: u32 = 8;
+/// Flag of `RenderParams::count` in the dispatches of wave w ≥ 1: the rest is w,
+/// and the dispatch covers the paths counted in block w - 1 (without it, the
+/// count is the dispatch's and the wave is 0).
+pub const RC_WAVE: u32 = 1 << 31;
 
 // Jitter modes of `render_raygen.comp` (its specialization constant `JITTER`).
 /// One sample per pixel: through the pixel centre.
@@ -186,7 +195,9 @@ pub const RENDER_SHADER_DEFINES: &[(&str, u32)] = &[
     ("RC_BAD_RAYS", RC_BAD_RAYS),
     ("RC_OVERFLOW", RC_OVERFLOW),
     ("RC_RASTER_EDGE", RC_RASTER_EDGE),
-    ("RC_COUNT", RC_COUNT),
+    ("RC_ARGS", RC_ARGS),
+    ("RC_STRIDE", RC_STRIDE),
+    ("RC_WAVE", RC_WAVE),
     ("JITTER_NONE", JITTER_NONE),
     ("JITTER_PER_PIXEL", JITTER_PER_PIXEL),
     ("JITTER_PER_SAMPLE", JITTER_PER_SAMPLE),

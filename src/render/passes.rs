@@ -1,6 +1,8 @@
-//! The per-sample passes: one submission per wave of rays, each dispatch
-//! between barriers and timestamps ([`Pass`]), and the render counters read
-//! back after each.
+//! The per-sample passes: one submission per sample holding every wave of
+//! rays, each dispatch between barriers and timestamps ([`Pass`]). The waves
+//! after the camera rays are dispatched indirectly, sized by the counters the
+//! shade pass before them wrote on the device (no host round trip between
+//! bounces); the host reads the counters once per sample, for the statistics.
 
 use ash::vk;
 
@@ -9,22 +11,28 @@ use std::io::Write;
 use std::path::Path;
 
 use super::abi::{RenderParams, ACCUM_BYTES, COUNTER_BYTES, HIT_BYTES, RAY_BYTES};
-use super::consts::{RC_BAD_RAYS, RC_COUNT, RC_NEXT, RC_OVERFLOW, RC_RASTER_EDGE, RC_SHADOW};
+use super::consts::{RC_ARGS, RC_BAD_RAYS, RC_NEXT, RC_OVERFLOW, RC_RASTER_EDGE, RC_SHADOW, RC_STRIDE, RC_WAVE};
 use super::output::RenderStats;
 use super::resources::{RasterPass, Resources};
 use crate::error::{Error, Result};
 use crate::geom::Hit;
-use crate::gpu::{Buffer, GpuContext, RasterView, Timestamps};
+use crate::gpu::{Buffer, GpuContext, Kernel, RasterView, Timestamps};
 use crate::scene::Camera;
 use crate::trace::Tracer;
 
-/// Timestamp pairs one submission records at most (one per dispatch).
-pub(super) const TIMESTAMP_PAIRS: u32 = 4;
+/// Timestamp pairs a sample's submission records at most (one per timed
+/// dispatch) with `waves` waves: ray generation, the camera rays' trace (or
+/// the two raster passes), their shade, then four per later wave (shadow trace,
+/// resolve, trace, shade) and two for the last wave's shadow rays.
+pub(super) fn timestamp_pairs(waves: u32) -> u32 {
+    4 + 4 * waves + 2
+}
 
 /// One submission's dispatches, each between a barrier and a pair of timestamps.
 pub(super) struct Pass<'a> {
     ctx: &'a GpuContext,
     timestamps: Option<&'a Timestamps>,
+    pairs: u32,
     kinds: Vec<Kind>,
     error: Option<Error>,
 }
@@ -43,26 +51,29 @@ pub(super) enum Kind {
 pub(super) type KindTimes = [f64; 5];
 
 impl<'a> Pass<'a> {
-    fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>) -> Self {
-        Pass { ctx, timestamps, kinds: Vec::new(), error: None }
+    fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>, pairs: u32) -> Self {
+        Pass { ctx, timestamps, pairs, kinds: Vec::new(), error: None }
     }
 
-    /// Resets the timestamps and zeroes the counters.
-    unsafe fn begin(&mut self, cmd: vk::CommandBuffer, counters: &Buffer) {
+    /// Resets the timestamps; with `counters`, sets the render counters to
+    /// `reset` (a sample's start).
+    unsafe fn begin(&mut self, cmd: vk::CommandBuffer, counters: Option<(&Buffer, &[u32])>) {
         if let Some(t) = self.timestamps {
             t.record_reset(cmd);
         }
-        self.ctx.device.cmd_fill_buffer(cmd, counters.buffer, 0, vk::WHOLE_SIZE, 0);
-        compute_barrier(self.ctx, cmd);
+        if let Some((buffer, reset)) = counters {
+            self.ctx.device.cmd_update_buffer(cmd, buffer.buffer, 0, bytemuck::cast_slice(reset));
+            compute_barrier(self.ctx, cmd);
+        }
     }
 
     unsafe fn timed(&mut self, cmd: vk::CommandBuffer, kind: Kind, record: impl FnOnce()) {
         let index = self.kinds.len() as u32;
-        if let Some(t) = self.timestamps.filter(|_| index < TIMESTAMP_PAIRS) {
+        if let Some(t) = self.timestamps.filter(|_| index < self.pairs) {
             t.record(cmd, 2 * index);
         }
         record();
-        if let Some(t) = self.timestamps.filter(|_| index < TIMESTAMP_PAIRS) {
+        if let Some(t) = self.timestamps.filter(|_| index < self.pairs) {
             t.record(cmd, 2 * index + 1);
         }
         self.kinds.push(kind);
@@ -88,7 +99,7 @@ impl<'a> Pass<'a> {
     unsafe fn end(&mut self, cmd: vk::CommandBuffer) {
         // Every query must be written before the results can be read with WAIT.
         if let Some(t) = self.timestamps {
-            for index in 2 * self.kinds.len().min(TIMESTAMP_PAIRS as usize) as u32..2 * TIMESTAMP_PAIRS {
+            for index in 2 * self.kinds.len().min(self.pairs as usize) as u32..2 * self.pairs {
                 t.record(cmd, index);
             }
         }
@@ -101,7 +112,7 @@ impl<'a> Pass<'a> {
             return Err(e);
         }
         if let Some(t) = self.timestamps {
-            for (i, &kind) in self.kinds.iter().enumerate().take(TIMESTAMP_PAIRS as usize) {
+            for (i, &kind) in self.kinds.iter().enumerate().take(self.pairs as usize) {
                 times[kind as usize] += t.seconds_between(2 * i as u32, 2 * i as u32 + 1)?;
             }
         }
@@ -109,7 +120,8 @@ impl<'a> Pass<'a> {
     }
 }
 
-/// Compute and transfer writes before compute, transfer and host access.
+/// Compute and transfer writes before compute, transfer and indirect-argument
+/// access (the render counters are read as dispatch arguments).
 unsafe fn compute_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
     let barrier = vk::MemoryBarrier::default()
         .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
@@ -117,12 +129,14 @@ unsafe fn compute_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
             vk::AccessFlags::SHADER_READ
                 | vk::AccessFlags::SHADER_WRITE
                 | vk::AccessFlags::TRANSFER_READ
-                | vk::AccessFlags::TRANSFER_WRITE,
+                | vk::AccessFlags::TRANSFER_WRITE
+                | vk::AccessFlags::INDIRECT_COMMAND_READ,
         );
+    let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
     ctx.device.cmd_pipeline_barrier(
         cmd,
-        vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
-        vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+        stages | vk::PipelineStageFlags::DRAW_INDIRECT,
+        stages | vk::PipelineStageFlags::DRAW_INDIRECT,
         vk::DependencyFlags::empty(),
         &[barrier],
         &[],
@@ -130,15 +144,21 @@ unsafe fn compute_barrier(ctx: &GpuContext, cmd: vk::CommandBuffer) {
     );
 }
 
-/// The render counters, `RC_*` each: next paths, shadow rays, bad rays, shadow
-/// overflow, raster edge pixels.
-fn read_counters(counters: &Buffer) -> Result<[u32; RC_COUNT as usize]> {
-    let bytes = counters.read(0, (u64::from(RC_COUNT) * COUNTER_BYTES) as usize)?;
-    let counter = |index: u32| {
-        let b = &bytes[(u64::from(index) * COUNTER_BYTES) as usize..][..4];
-        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
-    };
-    Ok([RC_NEXT, RC_SHADOW, RC_BAD_RAYS, RC_OVERFLOW, RC_RASTER_EDGE].map(counter))
+/// The render counters of `waves` waves, `RC_STRIDE` words each (`RC_*`).
+fn read_counters(counters: &Buffer, waves: u32) -> Result<Vec<u32>> {
+    let bytes = counters.read(0, (u64::from(waves * RC_STRIDE) * COUNTER_BYTES) as usize)?;
+    Ok(bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+}
+
+/// The render counters at a sample's start: every count 0, every wave's
+/// indirect dispatch (0, 1, 1).
+pub(super) fn counters_reset(waves: u32) -> Vec<u32> {
+    let mut words = vec![0; (waves * RC_STRIDE) as usize];
+    for block in words.chunks_exact_mut(RC_STRIDE as usize) {
+        block[RC_ARGS as usize + 1] = 1;
+        block[RC_ARGS as usize + 2] = 1;
+    }
+    words
 }
 
 /// The sample loop's state: what the passes record with and what they update.
@@ -189,11 +209,11 @@ impl SavedRays {
 }
 
 impl Frame<'_> {
-    /// Submission 1 of a sample of a chunk: its camera rays, their trace (or
-    /// their hits from the visibility buffer) and shade; in the first sample,
-    /// the copy of the first hits when asked for. `jitter` is the sample's one
-    /// jitter of rasterized first hits, `near` the rasterizer's near plane.
-    pub(super) fn camera_wave(
+    /// One sample of a chunk: one submission, or with `save_rays` in the first
+    /// sample one per wave (the rays are saved between them). Then the
+    /// statistics from the counters. `jitter` is the sample's one jitter of
+    /// rasterized first hits, `near` the rasterizer's near plane.
+    pub(super) fn sample(
         &mut self,
         camera: &Camera,
         sample: u32,
@@ -202,58 +222,58 @@ impl Frame<'_> {
         jitter: [f32; 2],
         near: f32,
     ) -> Result<()> {
-        let (ctx, res, tracer) = (self.ctx, self.res, self.tracer);
-        let (width, height) = (self.params.width, self.params.height);
-        let params = &mut self.params;
-        let device = &ctx.device;
-        let mut pass = Pass::new(ctx, res.timestamps.as_ref());
-        // SAFETY: the resources outlive the render's submissions, each of which
-        // completes before the next.
-        unsafe {
-            ctx.submit_and_wait(|cmd| {
-                pass.begin(cmd, &res.queues.counters);
-                params.count = chunk_pixels;
-                pass.shade(cmd, || {
-                    res.kernels.raygen.record_dispatch(
-                        cmd,
-                        res.sets.raygen.set,
-                        bytemuck::bytes_of(params),
-                        chunk_pixels,
-                    )
-                });
-                match &res.raster {
-                    None => pass
-                        .trace(cmd, Kind::TraceCamera, || tracer.record_binding(cmd, &res.trace_sets[0], chunk_pixels)),
-                    Some(RasterPass { rasterizer, visibility, kernel, set }) => {
-                        let view = RasterView::new(camera.pinhole(width, height), jitter, width, height, near);
-                        pass.raster(cmd, || rasterizer.record(cmd, &view, visibility));
-                        pass.raster(cmd, || {
-                            kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(params), chunk_pixels)
-                        });
+        let (ctx, res) = (self.ctx, self.res);
+        let waves = res.sizes.waves;
+        let pairs = timestamp_pairs(waves);
+        let reset = counters_reset(waves);
+        let split = self.save_rays.filter(|_| sample == 0);
+        // Wave 0 is the camera rays; step w (1..=waves) traces the shadow rays
+        // of wave w - 1, resolves them, traces the rays it appended and shades
+        // them as wave w (the last step only the shadow rays).
+        let steps: Vec<Vec<u32>> = match split {
+            None => vec![(0..=waves).collect()],
+            Some(_) => (0..=waves).map(|w| vec![w]).collect(),
+        };
+        for group in steps {
+            let mut pass = Pass::new(ctx, res.timestamps.as_ref(), pairs);
+            let first = group[0] == 0;
+            // SAFETY: the resources outlive the render's submissions, each of which
+            // completes before the next.
+            unsafe {
+                ctx.submit_and_wait(|cmd| {
+                    pass.begin(cmd, first.then_some((&res.queues.counters, &reset[..])));
+                    for &w in &group {
+                        match w {
+                            0 => self.record_camera_wave(&mut pass, cmd, camera, sample, chunk_pixels, jitter, near),
+                            w => self.record_wave(&mut pass, cmd, w, chunk_pixels),
+                        }
                     }
-                }
-                pass.shade(cmd, || {
-                    res.kernels.shade.record_dispatch(
-                        cmd,
-                        res.sets.shade[0].set,
-                        bytemuck::bytes_of(params),
-                        chunk_pixels,
-                    )
-                });
-                if let (Some(readback), 0) = (&res.hit_readback, sample) {
-                    let region =
-                        [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: u64::from(chunk_pixels) * HIT_BYTES }];
-                    device.cmd_copy_buffer(cmd, res.queues.a.hits.buffer, readback.buffer, &region);
-                }
-                pass.end(cmd);
-            })?;
+                    pass.end(cmd);
+                })?;
+            }
+            pass.finish(&mut self.times)?;
+            self.stats.submits += 1;
+            if let Some(dir) = split {
+                let w = group[0];
+                let counters = read_counters(&res.queues.counters, waves)?;
+                self.save_wave_rays(dir, w, chunk_pixels, &counters)?;
+            }
         }
-        pass.finish(&mut self.times)?;
-        self.stats.submits += 1;
         self.stats.camera_rays += u64::from(chunk_pixels);
-        if let (Some(dir), 0) = (self.save_rays, sample) {
-            self.saved.save(dir, "camera", &res.queues.a.rays, chunk_pixels)?;
+        let counters = read_counters(&res.queues.counters, waves)?;
+        let total =
+            |index: u32| counters.chunks_exact(RC_STRIDE as usize).map(|b| u64::from(b[index as usize])).sum::<u64>();
+        let overflow = total(RC_OVERFLOW);
+        if overflow > 0 {
+            return Err(Error::InvalidInput(format!(
+                "internal: {overflow} shadow rays did not fit their queue of {}",
+                res.sizes.shadow_capacity
+            )));
         }
+        self.stats.secondary_rays += total(RC_NEXT);
+        self.stats.shadow_rays += total(RC_SHADOW);
+        self.stats.bad_rays += total(RC_BAD_RAYS);
+        self.stats.raster_edge_pixels += total(RC_RASTER_EDGE);
         if let (Some(readback), Some(first), 0) = (&res.hit_readback, &mut self.first_hits, sample) {
             let hits: &[Hit] = bytemuck::cast_slice(readback.read(0, (u64::from(chunk_pixels) * HIT_BYTES) as usize)?);
             for (i, hit) in hits.iter().enumerate() {
@@ -263,82 +283,104 @@ impl Frame<'_> {
         Ok(())
     }
 
-    /// The submissions after the camera wave, until no path and no shadow ray
-    /// is left: each traces the shadow rays the last shade pass appended and
-    /// resolves them, then traces and shades the paths' next rays.
-    pub(super) fn path_waves(&mut self, sample: u32, chunk_pixels: u32) -> Result<()> {
-        let (ctx, res, tracer) = (self.ctx, self.res, self.tracer);
-        let params = &mut self.params;
-        let mut current = 0usize; // which queue holds the paths just shaded
-        let mut path_count = chunk_pixels;
-        let mut wave = 0u32;
-        loop {
-            let [next, shadows, bad, overflow, edges] = read_counters(&res.queues.counters)?;
-            self.stats.raster_edge_pixels += u64::from(edges);
-            self.stats.bad_rays += u64::from(bad);
-            if overflow > 0 {
-                return Err(Error::InvalidInput(format!(
-                    "internal: {overflow} shadow rays did not fit their queue of {}",
-                    res.sizes.shadow_capacity
-                )));
-            }
-            if next == 0 && shadows == 0 {
-                break;
-            }
-            if let (Some(dir), 0) = (self.save_rays, sample) {
-                let a_or_b = if current == 0 { res.queues.b_or_a() } else { &res.queues.a };
-                self.saved.save(dir, &format!("secondary-{}", wave + 1), &a_or_b.rays, next)?;
-                if let Some(q) = &res.queues.shadow {
-                    self.saved.save(dir, &format!("shadow-{wave}"), &q.rays, shadows)?;
-                }
-            }
-            let mut pass = Pass::new(ctx, res.timestamps.as_ref());
-            // SAFETY: as in `camera_wave`.
-            unsafe {
-                ctx.submit_and_wait(|cmd| {
-                    pass.begin(cmd, &res.queues.counters);
-                    if shadows > 0 {
-                        if let (Some(set), Some(resolve), Some(sets)) =
-                            (&res.shadow_sets, &res.kernels.resolve, &res.sets.resolve)
-                        {
-                            // The shadow rays of later path vertices are sorted first
-                            // (direction octant, origin cell): incoherent as appended,
-                            // they trace faster sorted, sort included (docs/PACKETS.md,
-                            // "Packets over bounces"); those of camera hits are not.
-                            let set = &set[usize::from(wave > 0)];
-                            pass.trace(cmd, Kind::TraceShadow, || tracer.record_binding(cmd, set, shadows));
-                            params.count = path_count;
-                            pass.shade(cmd, || {
-                                resolve.record_dispatch(cmd, sets[current].set, bytemuck::bytes_of(params), path_count)
-                            });
-                        }
-                    }
-                    if next > 0 {
-                        pass.trace(cmd, Kind::TraceSecondary, || {
-                            tracer.record_binding(cmd, &res.trace_sets[1 - current], next)
-                        });
-                        params.count = next;
-                        pass.shade(cmd, || {
-                            res.kernels.shade.record_dispatch(
-                                cmd,
-                                res.sets.shade[1 - current].set,
-                                bytemuck::bytes_of(params),
-                                next,
-                            )
-                        });
-                    }
-                    pass.end(cmd);
-                })?;
-            }
-            pass.finish(&mut self.times)?;
-            self.stats.submits += 1;
-            self.stats.shadow_rays += u64::from(shadows);
-            self.stats.secondary_rays += u64::from(next);
-            current = 1 - current;
-            path_count = next;
-            wave += 1;
+    /// `--save-rays`, after wave `w` of the first sample: the camera rays (wave
+    /// 0), the rays wave `w` appended (`secondary-{w+1}`) and its shadow rays
+    /// (`shadow-{w}`).
+    fn save_wave_rays(&mut self, dir: &Path, w: u32, chunk_pixels: u32, counters: &[u32]) -> Result<()> {
+        let res = self.res;
+        if w == 0 {
+            self.saved.save(dir, "camera", &res.queues.a.rays, chunk_pixels)?;
+        }
+        if w == res.sizes.waves {
+            return Ok(());
+        }
+        let block = &counters[(w * RC_STRIDE) as usize..][..RC_STRIDE as usize];
+        let next_queue = if w % 2 == 0 { res.queues.b_or_a() } else { &res.queues.a };
+        self.saved.save(dir, &format!("secondary-{}", w + 1), &next_queue.rays, block[RC_NEXT as usize])?;
+        if let Some(q) = &res.queues.shadow {
+            self.saved.save(dir, &format!("shadow-{w}"), &q.rays, block[RC_SHADOW as usize])?;
         }
         Ok(())
+    }
+
+    /// Records wave 0: the camera rays, their trace (or their hits from the
+    /// visibility buffer) and shade; in the first sample, the copy of the first
+    /// hits when asked for.
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn record_camera_wave(
+        &mut self,
+        pass: &mut Pass,
+        cmd: vk::CommandBuffer,
+        camera: &Camera,
+        sample: u32,
+        chunk_pixels: u32,
+        jitter: [f32; 2],
+        near: f32,
+    ) {
+        let (res, tracer) = (self.res, self.tracer);
+        let (width, height) = (self.params.width, self.params.height);
+        let params = &mut self.params;
+        params.count = chunk_pixels;
+        pass.shade(cmd, || {
+            res.kernels.raygen.record_dispatch(cmd, res.sets.raygen.set, bytemuck::bytes_of(params), chunk_pixels)
+        });
+        match &res.raster {
+            None => pass.trace(cmd, Kind::TraceCamera, || tracer.record_binding(cmd, &res.trace_sets[0], chunk_pixels)),
+            Some(RasterPass { rasterizer, visibility, kernel, set }) => {
+                let view = RasterView::new(camera.pinhole(width, height), jitter, width, height, near);
+                pass.raster(cmd, || rasterizer.record(cmd, &view, visibility));
+                pass.raster(cmd, || kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(params), chunk_pixels));
+            }
+        }
+        pass.shade(cmd, || {
+            res.kernels.shade.record_dispatch(cmd, res.sets.shade[0].set, bytemuck::bytes_of(params), chunk_pixels)
+        });
+        if let (Some(readback), 0) = (&res.hit_readback, sample) {
+            let region = [vk::BufferCopy { src_offset: 0, dst_offset: 0, size: u64::from(chunk_pixels) * HIT_BYTES }];
+            self.ctx.device.cmd_copy_buffer(cmd, res.queues.a.hits.buffer, readback.buffer, &region);
+        }
+    }
+
+    /// Records step `w` (1..=waves): the shadow rays of wave w - 1 traced and
+    /// resolved, then (below the last wave) the rays wave w - 1 appended traced
+    /// and shaded as wave w. Every count comes from the counters on the device:
+    /// the traces are device-counted ([`Tracer::record_binding_indirect`]), the
+    /// resolve and shade passes dispatched indirectly from a wave's `RC_ARGS`.
+    unsafe fn record_wave(&mut self, pass: &mut Pass, cmd: vk::CommandBuffer, w: u32, chunk_pixels: u32) {
+        let (res, tracer) = (self.res, self.tracer);
+        let params = &mut self.params;
+        let prev = w - 1;
+        let block = prev * RC_STRIDE;
+        let shaded = (prev % 2) as usize; // the queue wave w - 1 shaded
+        let counters = res.queues.counters.buffer;
+        // A dispatch of a render kernel over the paths wave `wave` shaded: all
+        // the chunk's in wave 0, else those counted in the block before.
+        let over_paths = |kernel: &Kernel, set: vk::DescriptorSet, params: &mut RenderParams, wave: u32| {
+            if wave == 0 {
+                params.count = chunk_pixels;
+                kernel.record_dispatch(cmd, set, bytemuck::bytes_of(params), chunk_pixels);
+            } else {
+                params.count = RC_WAVE | wave;
+                let args = u64::from((wave - 1) * RC_STRIDE + RC_ARGS) * COUNTER_BYTES;
+                kernel.record_dispatch_indirect(cmd, set, bytemuck::bytes_of(params), counters, args);
+            }
+        };
+        if let (Some(set), Some(resolve), Some(sets)) = (&res.shadow_sets, &res.kernels.resolve, &res.sets.resolve) {
+            // The shadow rays of later path vertices are sorted first (direction
+            // octant, origin cell): incoherent as appended, they trace faster
+            // sorted, sort included (docs/PACKETS.md, "Packets over bounces");
+            // those of camera hits are not.
+            let set = &set[usize::from(prev > 0)];
+            pass.trace(cmd, Kind::TraceShadow, || tracer.record_binding_indirect(cmd, set, block + RC_SHADOW));
+            pass.shade(cmd, || over_paths(resolve, sets[shaded].set, params, prev));
+        }
+        if w < res.sizes.waves {
+            let next = 1 - shaded;
+            pass.trace(cmd, Kind::TraceSecondary, || {
+                tracer.record_binding_indirect(cmd, &res.trace_sets[next], block + RC_NEXT)
+            });
+            pass.shade(cmd, || over_paths(&res.kernels.shade, res.sets.shade[next].set, params, w));
+        }
     }
 
     /// Copies the accumulation buffer to its host-visible readback and waits.

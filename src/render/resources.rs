@@ -12,7 +12,7 @@ use super::abi::{
     RAY_BYTES, SPAN_BYTES,
 };
 use super::consts::*;
-use super::passes::TIMESTAMP_PAIRS;
+use super::passes::timestamp_pairs;
 use super::plan::{material_flags, RenderPlan};
 use super::settings::RenderSettings;
 use crate::error::{Error, Result};
@@ -58,6 +58,9 @@ pub(super) struct Chunking {
     pub(super) chunk: u64,
     /// Shadow rays the shadow queue holds.
     pub(super) shadow_capacity: u64,
+    /// Waves of shading per sample (the camera rays' and those of the paths
+    /// they continue into): `max_depth` when paths continue, else 1.
+    pub(super) waves: u32,
 }
 
 impl Chunking {
@@ -81,7 +84,8 @@ impl Chunking {
             .min((SHADOW_QUEUE_BYTES / (entry_bytes * shadow_per_path)).max(1024))
             .min(limit / (largest * shadow_per_path))
             .max(1);
-        Ok(Chunking { pixel_count, chunk, shadow_capacity: chunk * shadow_per_path })
+        let waves = if plan.continue_paths { settings.max_depth } else { 1 };
+        Ok(Chunking { pixel_count, chunk, shadow_capacity: chunk * shadow_per_path, waves })
     }
 }
 
@@ -236,15 +240,15 @@ impl Queues {
     /// `host`: the ray queues are host-visible (`save_rays`).
     fn new(ctx: &Ctx, plan: &RenderPlan, sizes: Chunking, host: bool) -> Result<Queues> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let Chunking { pixel_count, chunk, shadow_capacity } = sizes;
+        let Chunking { pixel_count, chunk, shadow_capacity, waves } = sizes;
         let a = Queue::new(ctx, chunk, "queue A", host)?;
         let b = if plan.continue_paths { Some(Queue::new(ctx, chunk, "queue B", host)?) } else { None };
         let spans = Buffer::new(ctx, chunk * SPAN_BYTES, storage, MemoryLocation::GpuOnly, "shadow spans")?;
         let shadow = if plan.shadow_pass { Some(Queue::new(ctx, shadow_capacity, "shadow", host)?) } else { None };
         let counters = Buffer::new(
             ctx,
-            u64::from(RC_COUNT) * COUNTER_BYTES,
-            storage | vk::BufferUsageFlags::TRANSFER_DST,
+            u64::from(waves * RC_STRIDE) * COUNTER_BYTES,
+            storage | vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::INDIRECT_BUFFER,
             MemoryLocation::GpuToCpu,
             "render counters",
         )?;
@@ -444,10 +448,26 @@ impl Resources {
         let b_or_a = queues.b_or_a();
         // SAFETY: the ranges are whole storage buffers of this device, owned by
         // these resources, which outlive every submission of the render.
+        // The traces after the camera rays are device-counted: their counts are
+        // words of the render counters.
+        let counts = BufferRange::whole(&queues.counters);
         let trace_sets: [TraceBinding; 2] = unsafe {
+            let (a, b) = (&queues.a, b_or_a);
             [
-                tracer.bind(BufferRange::whole(&queues.a.rays), BufferRange::whole(&queues.a.hits), None, &closest)?,
-                tracer.bind(BufferRange::whole(&b_or_a.rays), BufferRange::whole(&b_or_a.hits), None, &closest)?,
+                tracer.bind_indirect(
+                    BufferRange::whole(&a.rays),
+                    BufferRange::whole(&a.hits),
+                    None,
+                    counts,
+                    &closest,
+                )?,
+                tracer.bind_indirect(
+                    BufferRange::whole(&b.rays),
+                    BufferRange::whole(&b.hits),
+                    None,
+                    counts,
+                    &closest,
+                )?,
             ]
         };
         let shadow_sets = match &queues.shadow {
@@ -457,7 +477,10 @@ impl Resources {
                 // Sorting is the kd-tree kernels' (the ray-query kernel traces rays as given).
                 let order = if tracer.backend() == Backend::KdTree { RayOrder::Coherent } else { RayOrder::AsGiven };
                 let sorted = TraceOptions { order, ..any_hit };
-                [tracer.bind(rays, hits, None, &any_hit)?, tracer.bind(rays, hits, None, &sorted)?]
+                [
+                    tracer.bind_indirect(rays, hits, None, counts, &any_hit)?,
+                    tracer.bind_indirect(rays, hits, None, counts, &sorted)?,
+                ]
             }),
             None => None,
         };
@@ -475,7 +498,7 @@ impl Resources {
             )?),
             false => None,
         };
-        let timestamps = Timestamps::new(&ctx, 2 * TIMESTAMP_PAIRS)?;
+        let timestamps = Timestamps::new(&ctx, 2 * timestamp_pairs(sizes.waves))?;
         Ok(Resources { trace_sets, shadow_sets, raster, timestamps, hit_readback, sets, queues, data, kernels, sizes })
     }
 }

@@ -13,8 +13,10 @@
 //!    the unoccluded contributions to the pixels;
 //! 5. queues A and B swap, and 2–4 repeat until no path is left.
 //!
-//! The host reads back only the two queue counters after each shade pass, and
-//! the image at the end. [`RenderPlan`] decides from the scene and the settings
+//! One submission per sample holds every wave: the traces and passes after the
+//! camera rays are dispatched indirectly, sized by the counters the shade pass
+//! before them wrote (`passes.rs`). The host reads the counters once per
+//! sample, for the statistics, and the image at the end. [`RenderPlan`] decides from the scene and the settings
 //! what a render needs; what it does not need is neither uploaded, compiled nor
 //! dispatched (see [`RenderPlan::explain`]).//!
 //! The code follows a render's life: [`RenderSettings`] (`settings.rs`) and
@@ -116,8 +118,7 @@ pub fn render_progressive(
             let jitter = if plan.jitter { ld2(0, sample, 0, settings.seed) } else { [0.5, 0.5] };
             frame.params.right[3] = jitter[0];
             frame.params.up[3] = jitter[1];
-            frame.camera_wave(camera, sample, first_pixel, chunk_pixels, jitter, near)?;
-            frame.path_waves(sample, chunk_pixels)?;
+            frame.sample(camera, sample, first_pixel, chunk_pixels, jitter, near)?;
             done += 1;
             progress(done, total);
             let samples = sample + 1;

@@ -7,10 +7,12 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS, BINDING_NODES, BINDING_NODE_BOXES, BINDING_ORDER, BINDING_PARENTS,
-    BINDING_PRIM_INDICES, BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, ORDER_BINDINGS,
-    ORDER_BINDING_BUCKETS, ORDER_BINDING_LIST, ORDER_BUCKETS, ORDER_WORKGROUP_SIZE, RQ_BINDINGS, RQ_BINDING_HITS,
-    RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS, RQ_BINDING_SCENE, TRACE_BINDINGS,
+    ARGS_BINDINGS, ARGS_BINDING_ARGS, ARGS_BINDING_SOURCE, BINDING_CAREFUL, BINDING_COUNTERS, BINDING_HITS,
+    BINDING_INDIRECT, BINDING_NODES, BINDING_NODE_BOXES, BINDING_ORDER, BINDING_PARENTS, BINDING_PRIM_INDICES,
+    BINDING_RAYS, BINDING_ROPES, BINDING_TRIANGLES, CAREFUL_HEADER_WORDS, INDIRECT_ORDER_ARGS, INDIRECT_WORDS,
+    ORDER_BINDINGS, ORDER_BINDING_BUCKETS, ORDER_BINDING_INDIRECT, ORDER_BINDING_LIST, ORDER_BUCKETS,
+    ORDER_WORKGROUP_SIZE, RQ_BINDINGS, RQ_BINDING_HITS, RQ_BINDING_INDIRECT, RQ_BINDING_PRIM_IDS, RQ_BINDING_RAYS,
+    RQ_BINDING_SCENE, TRACE_BINDINGS,
 };
 use crate::error::{Error, Result};
 use crate::gpu::{check_range, Binding, Buffer, BufferRange, BufferSet, Kernel};
@@ -37,6 +39,9 @@ pub struct TraceBinding {
     /// `RayOrder::Coherent`: the ordering kernels, their descriptor set, the bucket
     /// counts and the order.
     pub(super) order: Option<OrderPass>,
+    /// Device-counted traces ([`Tracer::bind_indirect`]): the arguments kernel,
+    /// its descriptor set, the arguments and the caller's count range.
+    pub(super) indirect: Option<IndirectArgs>,
     /// The hit and counter ranges bound (the counters: the caller's, or the
     /// tracer's `write_dummy`), which both passes of a robust trace write: the
     /// barrier between the passes names them.
@@ -69,7 +74,7 @@ pub(crate) fn buffer_barrier(
 /// Records a robust trace's two passes over descriptor set `set` (both kernels
 /// share its layout): the careful list emptied (indirect arguments 0, 1, 1;
 /// count 0) once an earlier recording's passes are done with it, the fast pass
-/// over `count` rays, then the careful pass dispatched indirectly over the rays
+/// over `count` rays (or indirectly over the arguments at `fast_args`), then the careful pass dispatched indirectly over the rays
 /// it listed. Every barrier is a buffer barrier on `list` or on the `rewritten`
 /// ranges the careful pass writes again after the fast one (hits, counters),
 /// never a global one. Used by `Tracer` and the two-level tracer.
@@ -85,6 +90,7 @@ pub(crate) unsafe fn record_fast_then_careful(
     set: vk::DescriptorSet,
     push: &[u8],
     count: u32,
+    fast_args: Option<(vk::Buffer, u64)>,
     [fast, careful]: [&Kernel; 2],
     list: &Buffer,
     rewritten: &[BufferRange],
@@ -107,7 +113,12 @@ pub(crate) unsafe fn record_fast_then_careful(
     unsafe { device.cmd_update_buffer(cmd, list.buffer, 0, bytemuck::cast_slice(&empty)) };
     barrier(transfer, compute, &[buffer_barrier(range, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
     // SAFETY: the caller's contract.
-    unsafe { fast.record_dispatch(cmd, set, push, count) };
+    unsafe {
+        match fast_args {
+            None => fast.record_dispatch(cmd, set, push, count),
+            Some((args, offset)) => fast.record_dispatch_indirect(cmd, set, push, args, offset),
+        }
+    };
     // The careful pass reads the list (as indirect arguments too) and rewrites
     // ranges the fast pass has just written: kdtrace's own writes of the
     // caller's ranges (any access of the caller's before the fast pass was
@@ -117,6 +128,25 @@ pub(crate) unsafe fn record_fast_then_careful(
     barrier(compute, indirect, &barriers);
     // SAFETY: the caller's contract; the list holds the indirect arguments.
     unsafe { careful.record_dispatch_indirect(cmd, set, push, list.buffer, 0) };
+}
+
+/// The arguments of a device-counted binding ([`Tracer::bind_indirect`]).
+pub(super) struct IndirectArgs {
+    pub(super) kernel: Arc<Kernel>,
+    pub(super) set: BufferSet,
+    /// `INDIRECT_WORDS` words: the trace dispatch, the count, the ordering dispatch.
+    pub(super) args: Buffer,
+    /// The caller's counts.
+    pub(super) source: BufferRange,
+}
+
+/// How many rays a recording traces: a count known when recording, or the
+/// `u32` at word `word` of a device-counted binding's count range, read when
+/// the trace runs.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum BatchCount {
+    Host(u32),
+    Device { word: u32 },
 }
 
 /// The ordering dispatches of a binding (`RayOrder::Coherent`).
@@ -183,15 +213,42 @@ impl Tracer {
         options: &TraceOptions,
     ) -> Result<TraceBinding> {
         // SAFETY: forwarded from the caller.
-        unsafe { self.bind_inner(rays, hits, counters, options, true) }
+        unsafe { self.bind_inner(rays, hits, counters, None, options, true) }
     }
 
-    /// `bind`; `upload`: whether missing side buffers may be uploaded (submits).
+    /// [`Tracer::bind`] for device-counted traces: the binding can also be
+    /// recorded with [`Tracer::record_binding_indirect`], which traces as many
+    /// rays as a `u32` of `counts` says when the trace runs (written by an
+    /// earlier pass of yours on the device, e.g. an atomic counter of rays
+    /// appended by a shading pass), with no readback to the host. It adds a
+    /// 32-byte arguments buffer and a descriptor set for the small kernel that
+    /// fills it ([`Tracer::record_binding_indirect`] says what it records).
+    ///
+    /// Errors: those of [`Tracer::bind`]; `counts` must hold a whole `u32`.
+    ///
+    /// # Safety
+    /// As [`Tracer::bind`], and `counts` (a range of a storage buffer of the
+    /// context's device) stays alive while the binding is used.
+    pub unsafe fn bind_indirect(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        counters: Option<BufferRange>,
+        counts: BufferRange,
+        options: &TraceOptions,
+    ) -> Result<TraceBinding> {
+        // SAFETY: forwarded from the caller.
+        unsafe { self.bind_inner(rays, hits, counters, Some(counts), options, true) }
+    }
+
+    /// `bind` (`bind_indirect` with `counts`); `upload`: whether missing side
+    /// buffers may be uploaded (submits).
     pub(super) unsafe fn bind_inner(
         &mut self,
         rays: BufferRange,
         hits: BufferRange,
         counters: Option<BufferRange>,
+        counts: Option<BufferRange>,
         options: &TraceOptions,
         upload: bool,
     ) -> Result<TraceBinding> {
@@ -258,6 +315,32 @@ impl Tracer {
         }
 
         let capacity = capacity.min(u32::MAX as u64) as u32;
+        let indirect = match counts {
+            None => None,
+            Some(source) => {
+                check_range(&self.ctx, "counts", &source)?;
+                if source.range < WORD_BYTES || source.offset % WORD_BYTES != 0 {
+                    return Err(Error::InvalidInput(format!(
+                        "the counts range ({} bytes at offset {}) must hold a whole u32 at a multiple of 4 bytes",
+                        source.range, source.offset
+                    )));
+                }
+                let kernel = self.pipelines.args_kernel()?;
+                let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::INDIRECT_BUFFER;
+                let bytes = u64::from(INDIRECT_WORDS) * WORD_BYTES;
+                let args = Buffer::new(&self.ctx, bytes, usage, MemoryLocation::GpuOnly, "indirect trace arguments")?;
+                let mut ranges = [source; ARGS_BINDINGS as usize];
+                ranges[ARGS_BINDING_SOURCE as usize] = source;
+                ranges[ARGS_BINDING_ARGS as usize] = BufferRange::whole(&args);
+                // SAFETY: the arguments buffer is this tracer's; the caller vouches for `source`.
+                let set = unsafe { BufferSet::from_ranges(&self.ctx, &kernel, &ranges)? };
+                Some(IndirectArgs { kernel, set, args, source })
+            }
+        };
+        let indirect_range = match &indirect {
+            Some(i) => BufferRange::whole(&i.args),
+            None => BufferRange::whole(&self.dummy),
+        };
         let scene = match &self.scene {
             TracerScene::KdTree(scene) => scene,
             TracerScene::RayQuery(scene) => {
@@ -267,6 +350,7 @@ impl Tracer {
                 bindings[RQ_BINDING_PRIM_IDS as usize] = Binding::Buffer(BufferRange::whole(&scene.prim_ids));
                 bindings[RQ_BINDING_RAYS as usize] = Binding::Buffer(rays);
                 bindings[RQ_BINDING_HITS as usize] = Binding::Buffer(hits);
+                bindings[RQ_BINDING_INDIRECT as usize] = Binding::Buffer(indirect_range);
                 // SAFETY: the structures and the prim-id buffer are this tracer's;
                 // the caller vouches for `rays` and `hits`.
                 let set = unsafe { BufferSet::from_bindings(&self.ctx, &k.main, &bindings)? };
@@ -274,6 +358,7 @@ impl Tracer {
                     set,
                     careful: None,
                     order: None,
+                    indirect,
                     hits,
                     counters: counters.unwrap_or(BufferRange::whole(&self.write_dummy)),
                     kernel,
@@ -293,6 +378,7 @@ impl Tracer {
         let counters = counters.unwrap_or(BufferRange::whole(&self.write_dummy));
         ranges[BINDING_COUNTERS as usize] = counters;
         ranges[BINDING_CAREFUL as usize] = BufferRange::whole(&self.write_dummy);
+        ranges[BINDING_INDIRECT as usize] = indirect_range;
         if let (true, Some([parents, boxes, ropes])) = (uses_links, &scene.links) {
             ranges[BINDING_PARENTS as usize] = BufferRange::whole(parents);
             ranges[BINDING_NODE_BOXES as usize] = BufferRange::whole(boxes);
@@ -331,6 +417,7 @@ impl Tracer {
                 let mut order_ranges = [rays; ORDER_BINDINGS as usize];
                 order_ranges[ORDER_BINDING_BUCKETS as usize] = BufferRange::whole(&buckets);
                 order_ranges[ORDER_BINDING_LIST as usize] = BufferRange::whole(&list);
+                order_ranges[ORDER_BINDING_INDIRECT as usize] = indirect_range;
                 // SAFETY: the bucket and order buffers are this tracer's; the caller
                 // vouches for `rays`. The three steps share one binding layout.
                 let set = unsafe { BufferSet::from_ranges(&self.ctx, &kernels[0], &order_ranges)? };
@@ -344,6 +431,7 @@ impl Tracer {
             set,
             careful,
             order,
+            indirect,
             hits,
             counters,
             kernel,
@@ -386,16 +474,20 @@ impl Tracer {
         cmd: vk::CommandBuffer,
         kernels: &TraceKernels,
         binding: &TraceBinding,
-        count: u32,
+        count: BatchCount,
     ) {
         let b = self.scene.bounds();
+        let (ray_count, indirect) = match count {
+            BatchCount::Host(n) => (n, None),
+            BatchCount::Device { word } => (binding.capacity, binding.indirect.as_ref().map(|i| (i, word))),
+        };
         let params = TraceParams {
             scene_min: [b.min.x, b.min.y, b.min.z, 0.0],
             scene_max: [b.max.x, b.max.y, b.max.z, 0.0],
-            ray_count: count,
+            ray_count,
             pad0: 0,
             ordered: binding.order.is_some() as u32,
-            pad2: 0,
+            indirect: indirect.is_some() as u32,
         };
         let push = bytemuck::bytes_of(&params);
         let device = &self.ctx.device;
@@ -414,10 +506,31 @@ impl Tracer {
             };
         };
         let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
+        let indirect_stage = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
         let (write, read_write) =
             (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+        // A dispatch over the batch: direct over `ray_count` invocations, or
+        // indirect from the arguments at word `at`.
+        let dispatch = |k: &Kernel, set: vk::DescriptorSet, at: u32| match indirect {
+            // SAFETY: the caller's contract; the arguments were written above.
+            Some((i, _)) => unsafe {
+                k.record_dispatch_indirect(cmd, set, push, i.args.buffer, u64::from(at) * WORD_BYTES)
+            },
+            // SAFETY: the caller's contract.
+            None => unsafe { k.record_dispatch(cmd, set, push, ray_count) },
+        };
         // SAFETY: forwarded from the caller; the list buffers live in the binding.
         unsafe {
+            if let Some((i, word)) = indirect {
+                // The arguments from the caller's count, once an earlier
+                // recording's dispatches have read them.
+                let args = BufferRange::whole(&i.args);
+                let read = vk::AccessFlags::INDIRECT_COMMAND_READ | vk::AccessFlags::SHADER_READ;
+                barrier(indirect_stage, compute, &[buffer_barrier(args, write, write)]);
+                let args_push: [u32; 2] = [word, binding.capacity];
+                i.kernel.record_dispatch(cmd, i.set.set, bytemuck::bytes_of(&args_push), 1);
+                barrier(compute, indirect_stage, &[buffer_barrier(args, write, read)]);
+            }
             if let Some(order) = &binding.order {
                 // The coherent order: count the buckets, scan them, place the rays.
                 // The fill waits for an earlier recording's steps over the buckets.
@@ -426,20 +539,22 @@ impl Tracer {
                 device.cmd_fill_buffer(cmd, order.buckets.buffer, 0, vk::WHOLE_SIZE, 0);
                 barrier(transfer, compute, &[buffer_barrier(buckets, vk::AccessFlags::TRANSFER_WRITE, read_write)]);
                 let [count_step, scan_step, scatter_step] = &*order.kernels;
-                let step = |k: &Kernel, threads: u32| {
-                    k.record_dispatch(cmd, order.set.set, push, threads);
+                let after_step = || {
                     barrier(
                         compute,
                         compute,
                         &[buffer_barrier(buckets, write, read_write), buffer_barrier(list, write, read_write)],
-                    );
+                    )
                 };
-                step(count_step, count);
-                step(scan_step, ORDER_WORKGROUP_SIZE);
-                step(scatter_step, count);
+                dispatch(count_step, order.set.set, INDIRECT_ORDER_ARGS);
+                after_step();
+                scan_step.record_dispatch(cmd, order.set.set, push, ORDER_WORKGROUP_SIZE);
+                after_step();
+                dispatch(scatter_step, order.set.set, INDIRECT_ORDER_ARGS);
+                after_step();
             }
             let (Some(careful), Some(list_buffer)) = (&kernels.careful, &binding.careful) else {
-                kernels.main.record_dispatch(cmd, binding.set.set, push, count);
+                dispatch(&kernels.main, binding.set.set, 0);
                 return;
             };
             let rewritten = [binding.hits, binding.counters];
@@ -448,12 +563,56 @@ impl Tracer {
                 cmd,
                 binding.set.set,
                 push,
-                count,
+                ray_count,
+                indirect.map(|(i, _)| (i.args.buffer, 0)),
                 [&kernels.main, careful],
                 list_buffer,
                 &rewritten,
             );
         }
+    }
+
+    /// Records into `cmd` the trace of as many rays of `binding`'s ray range as
+    /// the `u32` at word `word` of its count range says when the trace runs
+    /// (at most [`TraceBinding::capacity`]: rays past it are not traced); the
+    /// binding comes from [`Tracer::bind_indirect`]. Nothing is read back: the
+    /// dispatches are indirect. Recorded before the trace's own dispatches: a
+    /// one-invocation kernel that turns the count into the binding's arguments,
+    /// with a buffer barrier on them before and after. Never submits or waits.
+    ///
+    /// Barriers are yours as for [`Tracer::record_trace`], and the count is one
+    /// more input: make your write of it available to `COMPUTE_SHADER` with
+    /// `SHADER_READ` before this recording, and do not write it again before an
+    /// execution dependency after `COMPUTE_SHADER`.
+    ///
+    /// Errors (nothing is recorded then): those of [`Tracer::record_binding`];
+    /// `Error::InvalidInput` when `binding` was not made by
+    /// [`Tracer::bind_indirect`] or `word` lies past its count range.
+    ///
+    /// # Safety
+    /// As [`Tracer::record_binding`]; the count range's buffer too must stay alive
+    /// until `cmd` has completed.
+    pub unsafe fn record_binding_indirect(
+        &self,
+        cmd: vk::CommandBuffer,
+        binding: &TraceBinding,
+        word: u32,
+    ) -> Result<()> {
+        let kernel = self.check_binding(binding, 0)?;
+        let Some(i) = &binding.indirect else {
+            return Err(Error::InvalidInput(
+                "record_binding_indirect needs a binding made by Tracer::bind_indirect".into(),
+            ));
+        };
+        if (u64::from(word) + 1) * WORD_BYTES > i.source.range {
+            return Err(Error::InvalidInput(format!(
+                "count word {word} lies past the binding's count range of {} bytes",
+                i.source.range
+            )));
+        }
+        // SAFETY: checked above; the caller vouches for `cmd` and lifetimes.
+        unsafe { self.record_unchecked(cmd, kernel, binding, BatchCount::Device { word }) };
+        Ok(())
     }
 
     /// Records the trace of the first `count` rays of `binding`'s ray range into
@@ -474,7 +633,7 @@ impl Tracer {
         let kernel = self.check_binding(binding, count)?;
         if count > 0 {
             // SAFETY: checked above; the caller vouches for `cmd` and lifetimes.
-            unsafe { self.record_unchecked(cmd, kernel, binding, count) };
+            unsafe { self.record_unchecked(cmd, kernel, binding, BatchCount::Host(count)) };
         }
         Ok(())
     }
@@ -523,7 +682,7 @@ impl Tracer {
         }
         // SAFETY: forwarded from the caller.
         unsafe {
-            let binding = self.bind_inner(rays, hits, None, options, false)?;
+            let binding = self.bind_inner(rays, hits, None, None, options, false)?;
             self.record_binding(cmd, &binding, count)?;
             Ok(binding)
         }

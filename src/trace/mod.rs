@@ -472,7 +472,7 @@ impl Tracer {
                         ts.record_reset(cmd);
                         ts.record(cmd, 0);
                     }
-                    self.record_unchecked(cmd, kernel, &binding, count);
+                    self.record_unchecked(cmd, kernel, &binding, binding::BatchCount::Host(count));
                     if let Some(ts) = &timestamps {
                         ts.record(cmd, 1);
                     }

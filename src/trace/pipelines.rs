@@ -5,10 +5,10 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::consts::{
-    BINDING_NODES, BINDING_TRIANGLES, ORDER_BINDINGS, ORDER_STEP_COUNT, ORDER_STEP_SCAN, ORDER_STEP_SCATTER,
-    ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
-    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
-    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    ARGS_BINDINGS, BINDING_NODES, BINDING_TRIANGLES, ORDER_BINDINGS, ORDER_STEP_COUNT, ORDER_STEP_SCAN,
+    ORDER_STEP_SCATTER, ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, TRACE_BINDINGS, TRACE_SPECS,
+    TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST,
+    TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::gpu::{in_order, shaders, GpuContext, Kernel, KernelDesc};
@@ -33,12 +33,15 @@ pub struct TracePipelines {
     pub(super) kernels: Vec<((Backend, Traversal, bool), Arc<TraceKernels>)>,
     /// The ordering kernel's three steps (`RayOrder::Coherent`), compiled on first use.
     pub(super) order: Option<Arc<[Kernel; 3]>>,
+    /// The arguments kernel of device-counted traces
+    /// ([`Tracer::record_binding_indirect`](super::Tracer::record_binding_indirect)), compiled on first use.
+    pub(super) args: Option<Arc<Kernel>>,
 }
 
 impl TracePipelines {
     /// No pipelines yet, for `ctx`.
     pub fn new(ctx: &Arc<GpuContext>) -> TracePipelines {
-        TracePipelines { ctx: ctx.clone(), kernels: Vec::new(), order: None }
+        TracePipelines { ctx: ctx.clone(), kernels: Vec::new(), order: None, args: None }
     }
 
     /// Compiles the pipelines that tracing with `backend` and `options` needs
@@ -48,6 +51,31 @@ impl TracePipelines {
             self.order_kernels(backend)?;
         }
         self.kernel(backend, options.traversal, options.counters).map(|_| ())
+    }
+
+    /// The arguments kernel of device-counted traces (glsl/indirect_args.comp),
+    /// compiled on first use.
+    pub(super) fn args_kernel(&mut self) -> Result<Arc<Kernel>> {
+        if let Some(k) = &self.args {
+            return Ok(k.clone());
+        }
+        let kernel = Arc::new(Kernel::new(
+            &self.ctx,
+            &KernelDesc {
+                name: "indirect_args",
+                spirv: shaders::INDIRECT_ARGS,
+                bindings: ARGS_BINDINGS,
+                push_constant_size: 8,
+                spec_constants: &[],
+                workgroup_size: 1,
+                required_subgroup_size: None,
+                texel_buffers: &[],
+                acceleration_structures: &[],
+                required_subgroup_operations: vk::SubgroupFeatureFlags::empty(),
+            },
+        )?);
+        self.args = Some(kernel.clone());
+        Ok(kernel)
     }
 
     /// The ordering kernel's steps (count, scan, scatter), compiled on first use.

@@ -531,6 +531,7 @@ impl TwoLevelTracer {
                         binding.set.set,
                         push,
                         count,
+                        None,
                         [&passes.main, careful],
                         &binding.list,
                         &[binding.hits],
