@@ -323,6 +323,9 @@ fn print_summary(args: &RenderArgs, ctx: &GpuContext, out: &kdtrace::render::Ren
             s.traced_rays() as f64 / t.max(1e-12) / 1e6,
             sh * 1e3
         );
+        if let Some([raygen, shade, resolve]) = s.pass_seconds {
+            eprint!(" (raygen {:.1}, shade {:.1}, resolve {:.1})", raygen * 1e3, shade * 1e3, resolve * 1e3);
+        }
         // Where the trace time went: camera, shadow, secondary rays.
         let part = |name: &str, seconds: Option<f64>, rays: u64| match seconds {
             Some(t) if rays > 0 => {

@@ -27,6 +27,8 @@ pub struct RenderStats {
     pub trace_secondary_seconds: Option<f64>,
     /// GPU time of the ray generation, shade and resolve dispatches.
     pub shade_seconds: Option<f64>,
+    /// `shade_seconds` by kernel: ray generation, shade, resolve.
+    pub pass_seconds: Option<[f64; 3]>,
     /// Wall time of pipeline creation and uploads.
     pub setup_seconds: f64,
     /// Wall time of the sample loop (submits, waits, counter readbacks).

@@ -45,10 +45,12 @@ pub(super) enum Kind {
     TraceSecondary = 2,
     Shade = 3,
     Raster = 4,
+    Raygen = 5,
+    Resolve = 6,
 }
 
 /// GPU seconds per [`Kind`].
-pub(super) type KindTimes = [f64; 5];
+pub(super) type KindTimes = [f64; 7];
 
 impl<'a> Pass<'a> {
     fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>, pairs: u32) -> Self {
@@ -88,8 +90,8 @@ impl<'a> Pass<'a> {
         }
     }
 
-    unsafe fn shade(&mut self, cmd: vk::CommandBuffer, record: impl FnOnce()) {
-        self.timed(cmd, Kind::Shade, record);
+    unsafe fn shade(&mut self, cmd: vk::CommandBuffer, kind: Kind, record: impl FnOnce()) {
+        self.timed(cmd, kind, record);
     }
 
     unsafe fn raster(&mut self, cmd: vk::CommandBuffer, record: impl FnOnce()) {
@@ -321,7 +323,7 @@ impl Frame<'_> {
         let (width, height) = (self.params.width, self.params.height);
         let params = &mut self.params;
         params.count = chunk_pixels;
-        pass.shade(cmd, || {
+        pass.shade(cmd, Kind::Raygen, || {
             res.kernels.raygen.record_dispatch(cmd, res.sets.raygen.set, bytemuck::bytes_of(params), chunk_pixels)
         });
         match &res.raster {
@@ -332,7 +334,7 @@ impl Frame<'_> {
                 pass.raster(cmd, || kernel.record_dispatch(cmd, set.set, bytemuck::bytes_of(params), chunk_pixels));
             }
         }
-        pass.shade(cmd, || {
+        pass.shade(cmd, Kind::Shade, || {
             res.kernels.shade.record_dispatch(cmd, res.sets.shade[0].set, bytemuck::bytes_of(params), chunk_pixels)
         });
         if let (Some(readback), 0) = (&res.hit_readback, sample) {
@@ -372,14 +374,14 @@ impl Frame<'_> {
             // those of camera hits are not.
             let set = &set[usize::from(prev > 0)];
             pass.trace(cmd, Kind::TraceShadow, || tracer.record_binding_indirect(cmd, set, block + RC_SHADOW));
-            pass.shade(cmd, || over_paths(resolve, sets[shaded].set, params, prev));
+            pass.shade(cmd, Kind::Resolve, || over_paths(resolve, sets[shaded].set, params, prev));
         }
         if w < res.sizes.waves {
             let next = 1 - shaded;
             pass.trace(cmd, Kind::TraceSecondary, || {
                 tracer.record_binding_indirect(cmd, &res.trace_sets[next], block + RC_NEXT)
             });
-            pass.shade(cmd, || over_paths(&res.kernels.shade, res.sets.shade[next].set, params, w));
+            pass.shade(cmd, Kind::Shade, || over_paths(&res.kernels.shade, res.sets.shade[next].set, params, w));
         }
     }
 

@@ -94,7 +94,7 @@ pub fn render_progressive(
         tracer,
         params: params(camera, settings, &plan, res.sizes.shadow_capacity),
         stats: RenderStats { setup_seconds, rasterized: res.raster.is_some(), ..Default::default() },
-        times: [0.0; 5],
+        times: [0.0; 7],
         first_hits,
         save_rays: settings.save_rays.as_deref(),
         saved: Default::default(),
@@ -141,7 +141,9 @@ pub fn render_progressive(
         stats.trace_camera_seconds = (!stats.rasterized).then_some(camera);
         stats.trace_shadow_seconds = Some(shadow);
         stats.trace_secondary_seconds = Some(secondary);
-        stats.shade_seconds = Some(times[Kind::Shade as usize]);
+        let [raygen, shade, resolve] = [Kind::Raygen, Kind::Shade, Kind::Resolve].map(|k| times[k as usize]);
+        stats.shade_seconds = Some(raygen + shade + resolve);
+        stats.pass_seconds = Some([raygen, shade, resolve]);
         if res.raster.is_some() {
             stats.raster_seconds = Some(times[Kind::Raster as usize]);
         }
