@@ -57,14 +57,19 @@ uint owen_scramble(uint x, uint seed) {
 }
 
 // The second dimension of the Sobol sequence (its first is the bit reversal).
+// Its generator matrix is Pascal's triangle mod 2: digit r of the point is the
+// parity of the index bits c with C(c, r) odd, i.e. (Lucas) the bits c that
+// contain r's bits. Five shift-and-mask steps sum every bit into its subsets,
+// then the bit reversal makes digit r bit 31 - r: the same values as the
+// 32-step loop over the direction numbers, in 11 operations.
 uint sobol_second(uint index) {
-    uint result = 0u;
-    uint v = 1u << 31;
-    for (uint i = index; i != 0u; i >>= 1) {
-        if ((i & 1u) != 0u) result ^= v;
-        v ^= v >> 1;
-    }
-    return result;
+    uint y = index;
+    y ^= (y >> 1) & 0x55555555u;
+    y ^= (y >> 2) & 0x33333333u;
+    y ^= (y >> 4) & 0x0f0f0f0fu;
+    y ^= (y >> 8) & 0x00ff00ffu;
+    y ^= y >> 16;
+    return bitfieldReverse(y);
 }
 
 // Point `sample_index` of a 2D low-discrepancy set for (pixel, dimension pair):
