@@ -155,6 +155,24 @@ struct BvhNode {
     condition: f32,
 }
 
+/// The work of a two-level trace: top-level nodes visited, instances entered
+/// (object rays traced) and the nodes and triangle tests inside them.
+#[derive(Clone, Copy, Debug, Default)]
+struct TopCounts {
+    top_nodes: u64,
+    entries: u64,
+    inner_nodes: u64,
+    inner_triangles: u64,
+}
+
+impl TopCounts {
+    fn add_entry(&mut self, inner: &crate::kdtree::traverse::Counters) {
+        self.entries += 1;
+        self.inner_nodes += inner.nodes as u64;
+        self.inner_triangles += inner.triangles as u64;
+    }
+}
+
 /// A two-level scene: geometries, their instances and the top level.
 pub struct TwoLevelScene {
     geometries: Vec<BottomLevel>,
@@ -383,6 +401,11 @@ impl TwoLevelScene {
     /// is cut short the answer is `PRIM_INCOMPLETE` (for any hit, unless another
     /// instance occludes), never a miss or a possibly farther hit.
     pub fn trace(&self, ray: &Ray, mask: u8, traversal: Traversal) -> InstanceHit {
+        self.trace_counted(ray, mask, traversal, &mut TopCounts::default())
+    }
+
+    /// [`TwoLevelScene::trace`], adding its work to `counts`.
+    fn trace_counted(&self, ray: &Ray, mask: u8, traversal: Traversal, counts: &mut TopCounts) -> InstanceHit {
         let mut best = InstanceHit::MISS;
         if self.nodes.is_empty() || !ray.is_valid() || mask == 0 {
             if !ray.is_valid() {
@@ -407,6 +430,7 @@ impl TwoLevelScene {
         let one_instance = self.placed.len() == 1;
         while let Some(n) = stack.pop() {
             let node = self.nodes[n as usize];
+            counts.top_nodes += 1;
             let reach = best.t.min(ray.tmax);
             if !one_instance && enters(n, reach).is_none() {
                 continue;
@@ -429,7 +453,8 @@ impl TwoLevelScene {
                 let mut object = self.object_ray(i as usize, ray);
                 object.tmax = best.t.min(ray.tmax);
                 let view = SceneRef::new(&geometry.tree, &geometry.triangles).with_links(&self.links[g]);
-                let (hit, _) = trace_ray(&view, &object, traversal);
+                let (hit, inner) = trace_ray(&view, &object, traversal);
+                counts.add_entry(&inner);
                 if !hit.is_hit() {
                     // Cut short (or an object ray the transform made invalid): an
                     // answer of this instance is unknown.
@@ -624,3 +649,5 @@ pub(crate) fn is_identity(m: &[[f32; 4]; 3]) -> bool {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod top_kd;
