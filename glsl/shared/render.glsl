@@ -157,17 +157,20 @@ vec3 triangle_scale(vec3 v0, vec3 v1, vec3 v2) {
 // units in the last place proportional to n). Per axis: 1024 * n ulps of p where
 // |p| is at least a quarter of the axis's scale; where it is smaller (the
 // vertices' coordinates cancelled, so p's error exceeds its ulp) a fixed
-// n * scale * 2^-14 instead (512 ulps of the scale).
+// n * 2^-14 of the triangle's largest coordinate on any axis instead.
 //
-// Why 1024 and not the 64 that suffice for correctness: the robust traversal
-// decides a triangle hit within its f32 error bound of tmin (about 2^-17 of the
-// triangle's scale) with the exact float-float test, and a ray starting closer
-// than that to its own triangle's plane takes that test on every ray. With 64
-// ulps, Cornell's secondary and shadow rays traced 1.9-2.5x slower (docs/RENDERING.md).
+// Why so far and not the 64 ulps that suffice for correctness: the robust
+// traversal decides a triangle hit within its f32 error bound of tmin (about
+// 2^-17 of the triangle's largest coordinate) with the exact float-float test,
+// and a ray starting closer than that to its own triangle's plane takes that
+// test on every ray. With 64 ulps, Cornell's secondary and shadow rays traced
+// 1.9-2.5x slower; with the fixed offset 2^-14 of the axis's own scale (floored
+// at 2^-8 of the largest coordinate: 30x inside the band on a floor at y = 0),
+// 12-14 % of them took the careful pass (docs/RENDERING.md).
 vec3 offset_origin(vec3 p, vec3 n, vec3 scale) {
     ivec3 ulps = ivec3(1024.0 * n);
     vec3 by_ulps = intBitsToFloat(floatBitsToInt(p) + mix(ulps, -ulps, lessThan(p, vec3(0.0))));
-    vec3 by_scale = p + n * scale * (1.0 / 16384.0);
+    vec3 by_scale = p + n * (max(max(scale.x, scale.y), scale.z) * (1.0 / 16384.0));
     return mix(by_ulps, by_scale, lessThanEqual(abs(p), 0.25 * scale));
 }
 
