@@ -141,37 +141,37 @@ vec3 cosine_direction(vec3 n, vec2 u) {
 
 // --- Robust secondary-ray origins -------------------------------------------
 
-// How far rounding may have moved a point computed from a triangle's vertices
-// by barycentric weights, per axis: a few units in the last place of the
-// largest vertex coordinate on that axis. Floored at 2^-8 of the largest
-// coordinate, so that an axis on which all vertices are 0 still gets an offset.
+// The largest vertex coordinate of a triangle on each axis: how far rounding
+// may have moved a point computed from its vertices by barycentric weights is a
+// few units in the last place of it.
 vec3 triangle_scale(vec3 v0, vec3 v1, vec3 v2) {
-    vec3 s = max(max(abs(v0), abs(v1)), abs(v2));
-    return max(s, vec3(max(max(s.x, s.y), s.z) * (1.0 / 256.0)));
+    return max(max(abs(v0), abs(v1)), abs(v2));
 }
 
 // Moves p, a point on a triangle computed from its vertices (triangle_scale
 // gives `scale`), off the surface toward the unit normal n, far enough that
 // rounding cannot have left it on the wrong side, so a ray from it does not
 // hit its own surface (after Wächter & Binder 2019, who offset by a number of
-// units in the last place proportional to n). Per axis: 1024 * n ulps of p where
-// |p| is at least a quarter of the axis's scale; where it is smaller (the
-// vertices' coordinates cancelled, so p's error exceeds its ulp) a fixed
-// n * 2^-14 of the triangle's largest coordinate on any axis instead.
+// units in the last place proportional to n). Per axis, the farther of two
+// moves: 1024 * n ulps of p, and n * 2^-14 of the triangle's largest coordinate
+// on any axis (which also covers a coordinate whose vertices cancelled, so
+// that p's error exceeds its ulp). `scale` enters only through its largest
+// component.
 //
 // Why so far and not the 64 ulps that suffice for correctness: the robust
 // traversal decides a triangle hit within its f32 error bound of tmin (about
 // 2^-17 of the triangle's largest coordinate) with the exact float-float test,
 // and a ray starting closer than that to its own triangle's plane takes that
 // test on every ray. With 64 ulps, Cornell's secondary and shadow rays traced
-// 1.9-2.5x slower; with the fixed offset 2^-14 of the axis's own scale (floored
-// at 2^-8 of the largest coordinate: 30x inside the band on a floor at y = 0),
-// 12-14 % of them took the careful pass (docs/RENDERING.md).
+// 1.9-2.5x slower; with offsets taken from the axis's own coordinates (1024 ulps
+// of a small coordinate, or 2^-14 of the axis's scale floored at 2^-8 of the
+// largest: 30x inside the band on a floor at y = 0), 6-14 % of Cornell's and
+// q3_20kdm2's took the careful pass (docs/RENDERING.md).
 vec3 offset_origin(vec3 p, vec3 n, vec3 scale) {
     ivec3 ulps = ivec3(1024.0 * n);
     vec3 by_ulps = intBitsToFloat(floatBitsToInt(p) + mix(ulps, -ulps, lessThan(p, vec3(0.0))));
     vec3 by_scale = p + n * (max(max(scale.x, scale.y), scale.z) * (1.0 / 16384.0));
-    return mix(by_ulps, by_scale, lessThanEqual(abs(p), 0.25 * scale));
+    return mix(by_scale, by_ulps, greaterThan(abs(by_ulps - p), abs(by_scale - p)));
 }
 
 float luminance(vec3 c) {
