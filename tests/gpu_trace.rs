@@ -351,3 +351,46 @@ fn pipelines_compiled_in_advance_are_adopted() {
     assert_validation_clean(&ctx);
     assert_validation_clean(&other);
 }
+
+/// `TraceResult::careful_rays` counts the rays the robust fast pass left to the
+/// careful pass: rays that start on a triangle's plane (their own surface's hit at
+/// `tmin`, within rounding) are all traced again and counted; the same rays moved
+/// 2^-14 of the scene's coordinates off the plane (as the renderer moves its
+/// secondary rays) take the fast pass alone; `--plain`, which has no careful pass, reports none.
+#[test]
+fn rays_starting_on_a_surface_take_the_careful_pass_and_are_counted() {
+    let quad = |z: f32| {
+        let [a, b, c, d] =
+            [(-100.0, -100.0), (100.0, -100.0), (100.0, 100.0), (-100.0, 100.0)].map(|(x, y)| Vec3::new(x, y, z));
+        [[a, b, c], [a, c, d]]
+    };
+    let triangles: Vec<[Vec3; 3]> = [quad(0.0), quad(50.0)].concat();
+    let tree = KdTree::build(&triangles, &BuildConfig::default());
+    let ctx = context();
+    let mut tracer = Tracer::new(&ctx, &tree, &triangles).unwrap();
+    let mut rng = Rng(29);
+    let starts: Vec<(Vec3, Vec3)> = (0..1000)
+        .map(|_| {
+            let o = Vec3::new(rng.range(-60.0, 60.0), rng.range(-60.0, 60.0), 0.0);
+            (o, Vec3::new(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5), 1.0))
+        })
+        .collect();
+    let rays = |lift: f32| -> Vec<Ray> {
+        starts.iter().map(|&(o, d)| Ray::new(o + Vec3::Z * lift, d, 0.0, f32::INFINITY)).collect()
+    };
+    let robust = TraceOptions::default();
+    let on = tracer.trace(&rays(0.0), &robust).unwrap();
+    let off = tracer.trace(&rays(100.0 / 16384.0), &robust).unwrap();
+    assert_eq!(on.careful_rays, Some(1000), "every ray from the floor's plane is settled carefully");
+    assert_eq!(off.careful_rays, Some(0), "rays lifted off the floor need no careful pass");
+    // The closed segment starts on the floor: its exact answer is the floor at
+    // t = 0; lifted, the roof.
+    for (a, b) in on.hits.iter().zip(&off.hits) {
+        assert!(a.prim_id < 2 && a.t == 0.0, "the floor at t = 0: {a:?}");
+        assert!(b.prim_id >= 2 && b.t > 49.0, "the roof: {b:?}");
+    }
+    let plain = TraceOptions { traversal: Traversal { robust: false, ..Traversal::closest(Variant::Stack) }, ..robust };
+    assert_eq!(tracer.trace(&rays(0.0), &plain).unwrap().careful_rays, None);
+    drop(tracer);
+    assert_validation_clean(&ctx);
+}

@@ -161,6 +161,13 @@ pub fn trace(args: TraceArgs) -> Result<()> {
         ),
         _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", label, wall * 1e3),
     }
+    if let Some(n) = result.careful_rays {
+        eprintln!(
+            "careful pass: {n} of {} rays ({:.2} %) traced again by the robust careful pass",
+            rays.len(),
+            100.0 * n as f64 / rays.len().max(1) as f64
+        );
+    }
     stages.print();
     match Unfinished::from_hits(&result.hits) {
         Some(u) => Err(u.into()),

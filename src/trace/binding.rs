@@ -390,7 +390,8 @@ impl Tracer {
                 let bytes = (CAREFUL_HEADER_WORDS as u64 + capacity as u64) * WORD_BYTES;
                 let usage = vk::BufferUsageFlags::STORAGE_BUFFER
                     | vk::BufferUsageFlags::INDIRECT_BUFFER
-                    | vk::BufferUsageFlags::TRANSFER_DST;
+                    | vk::BufferUsageFlags::TRANSFER_DST
+                    | vk::BufferUsageFlags::TRANSFER_SRC;
                 let list = Buffer::new(&self.ctx, bytes, usage, MemoryLocation::GpuOnly, "careful-pass list")?;
                 check_range(&self.ctx, "careful-pass list", &BufferRange::whole(&list))?;
                 ranges[BINDING_CAREFUL as usize] = BufferRange::whole(&list);

@@ -124,8 +124,8 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
-    TRACE_WORKGROUP_SIZE,
+    CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS,
+    COUNTER_STEPS, COUNTER_TRIANGLES, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -144,7 +144,7 @@ pub(crate) mod scene;
 pub use binding::TraceBinding;
 pub(crate) use binding::{buffer_barrier, record_fast_then_careful};
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
-use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES};
+use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES, WORD_BYTES};
 use pipelines::TraceKernels;
 pub use pipelines::TracePipelines;
 pub use scene::scene_device_bytes;
@@ -454,11 +454,23 @@ impl Tracer {
             )?
         };
         let timestamps = Timestamps::new(&ctx, 2)?;
+        // The careful pass's count (word CAREFUL_COUNT of its list), copied back per batch.
+        let careful_count = match &binding.careful {
+            Some(_) => Some(Buffer::new(
+                &ctx,
+                WORD_BYTES,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+                "careful-pass count",
+            )?),
+            None => None,
+        };
 
         let mut result = TraceResult {
             hits: Vec::with_capacity(rays.len()),
             counters: options.counters.then(|| Vec::with_capacity(rays.len())),
             gpu_seconds: timestamps.as_ref().map(|_| 0.0),
+            careful_rays: careful_count.as_ref().map(|_| 0),
         };
         for batch in rays.chunks(chunk) {
             ray_buf.write(0, bytemuck::cast_slice(batch))?;
@@ -476,6 +488,26 @@ impl Tracer {
                     if let Some(ts) = &timestamps {
                         ts.record(cmd, 1);
                     }
+                    if let (Some(list), Some(count)) = (&binding.careful, &careful_count) {
+                        let barrier = binding::buffer_barrier(
+                            BufferRange::whole(list),
+                            vk::AccessFlags::SHADER_WRITE,
+                            vk::AccessFlags::TRANSFER_READ,
+                        );
+                        ctx.device.cmd_pipeline_barrier(
+                            cmd,
+                            vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
+                            vk::PipelineStageFlags::TRANSFER,
+                            vk::DependencyFlags::empty(),
+                            &[],
+                            &[barrier],
+                            &[],
+                        );
+                        // The count follows the indirect arguments x, y, z (BINDING_CAREFUL).
+                        let at = (CAREFUL_HEADER_WORDS as u64 - 1) * WORD_BYTES;
+                        let region = vk::BufferCopy { src_offset: at, dst_offset: 0, size: WORD_BYTES };
+                        ctx.device.cmd_copy_buffer(cmd, list.buffer, count.buffer, &[region]);
+                    }
                     // Make the shader writes visible to the host reads below.
                     ctx.record_host_read_barrier(cmd);
                 }
@@ -485,6 +517,10 @@ impl Tracer {
             }
             if ctx.timestamps_unreliable() {
                 result.gpu_seconds = None;
+            }
+            if let (Some(total), Some(count)) = (result.careful_rays.as_mut(), &careful_count) {
+                let word: &[u32] = bytemuck::cast_slice(count.read(0, WORD_BYTES as usize)?);
+                *total += word[0] as u64;
             }
             let hits: &[Hit] = bytemuck::cast_slice(hit_buf.read(0, batch.len() * HIT_BYTES as usize)?);
             result.hits.extend_from_slice(hits);

@@ -89,6 +89,14 @@ pub struct TraceResult {
     pub counters: Option<Vec<Counters>>,
     /// GPU time of the trace dispatches alone (timestamps), when the device has timestamps.
     pub gpu_seconds: Option<f64>,
+    /// Robust single rays: how many rays the fast pass listed for the careful
+    /// pass, which traces them again from scratch (a ray it could not decide in
+    /// f32: an origin within rounding of a triangle's plane, an edge or vertex met
+    /// within rounding, a tie in depth, a far origin). `None` for the kernels
+    /// without a careful pass (`--plain`, packets, the ray-query backend). Many
+    /// listed rays mean slow rays, not wrong ones: see docs/EMBEDDING.md, "Rays
+    /// that leave a surface".
+    pub careful_rays: Option<u64>,
 }
 
 impl TraceResult {
