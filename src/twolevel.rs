@@ -395,6 +395,47 @@ impl TwoLevelScene {
         Ray::new(origin, dir, ray.tmin, ray.tmax)
     }
 
+    /// Traces instance `i`'s object ray for `ray`, cut at the best hit so far:
+    /// `best` becomes its hit when that is no farther; a traversal cut short (or
+    /// an object ray the transform made invalid) sets `incomplete`, as this
+    /// instance's answer is unknown. True when an any-hit trace may stop.
+    fn enter(
+        &self,
+        i: u32,
+        ray: &Ray,
+        traversal: Traversal,
+        best: &mut InstanceHit,
+        incomplete: &mut bool,
+        counts: &mut TopCounts,
+    ) -> bool {
+        let placed = &self.placed[i as usize];
+        let g = placed.instance.geometry;
+        let geometry = &self.geometries[g];
+        let mut object = self.object_ray(i as usize, ray);
+        object.tmax = best.t.min(ray.tmax);
+        let view = SceneRef::new(&geometry.tree, &geometry.triangles).with_links(&self.links[g]);
+        let (hit, inner) = trace_ray(&view, &object, traversal);
+        counts.add_entry(&inner);
+        if !hit.is_hit() {
+            *incomplete |= hit.prim_id != PRIM_MISS;
+            return false;
+        }
+        if hit.t <= best.t || !best.is_hit() {
+            *best = InstanceHit {
+                t: hit.t,
+                instance_id: placed.instance.instance_id,
+                geometry_id: geometry.id,
+                prim_index: hit.prim_id,
+                u: hit.u,
+                v: hit.v,
+                front_face: faces(&geometry.triangles[hit.prim_id as usize], object.traced_dir()),
+                instance_index: i,
+            };
+            return traversal.any_hit;
+        }
+        false
+    }
+
     /// The closest hit of `ray` among the instances visible to `mask`, each
     /// traced with `traversal` (any variant, robust or plain). Any-hit
     /// traversals stop at the first instance hit. When an instance's traversal
@@ -444,38 +485,10 @@ impl TwoLevelScene {
                 continue;
             }
             for &i in &self.order[node.index as usize..(node.index + node.count) as usize] {
-                let placed = &self.placed[i as usize];
-                if placed.instance.mask & mask == 0 {
-                    continue;
-                }
-                let g = placed.instance.geometry;
-                let geometry = &self.geometries[g];
-                let mut object = self.object_ray(i as usize, ray);
-                object.tmax = best.t.min(ray.tmax);
-                let view = SceneRef::new(&geometry.tree, &geometry.triangles).with_links(&self.links[g]);
-                let (hit, inner) = trace_ray(&view, &object, traversal);
-                counts.add_entry(&inner);
-                if !hit.is_hit() {
-                    // Cut short (or an object ray the transform made invalid): an
-                    // answer of this instance is unknown.
-                    incomplete |= hit.prim_id != PRIM_MISS;
-                    continue;
-                }
-                if hit.t <= best.t || !best.is_hit() {
-                    let triangle = &geometry.triangles[hit.prim_id as usize];
-                    best = InstanceHit {
-                        t: hit.t,
-                        instance_id: placed.instance.instance_id,
-                        geometry_id: geometry.id,
-                        prim_index: hit.prim_id,
-                        u: hit.u,
-                        v: hit.v,
-                        front_face: faces(triangle, object.traced_dir()),
-                        instance_index: i,
-                    };
-                    if traversal.any_hit {
-                        return best;
-                    }
+                if self.placed[i as usize].instance.mask & mask != 0
+                    && self.enter(i, ray, traversal, &mut best, &mut incomplete, counts)
+                {
+                    return best;
                 }
             }
         }

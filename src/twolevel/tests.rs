@@ -8,7 +8,7 @@ use crate::kdtree::traverse::Variant;
 use crate::kdtree::BuildConfig;
 
 /// A closed, bumpy sphere of shared vertices: edges and vertices everywhere.
-fn sphere(rings: usize, segments: usize) -> Vec<[Vec3; 3]> {
+pub(super) fn sphere(rings: usize, segments: usize) -> Vec<[Vec3; 3]> {
     let p = |i: usize, j: usize| {
         let theta = std::f32::consts::PI * i as f32 / rings as f32;
         let phi = std::f32::consts::TAU * (j % segments) as f32 / segments as f32;

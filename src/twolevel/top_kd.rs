@@ -10,6 +10,7 @@
 //! prints the table of docs/EMBEDDING.md (bunny scenes are skipped when
 //! scenes/bunny.obj has not been fetched).
 
+use super::tests::sphere;
 use super::*;
 use crate::kdtree::traverse::Variant;
 
@@ -181,32 +182,8 @@ impl KdTop {
                             if best.is_hit() && entry > best.t {
                                 break;
                             }
-                            let placed = &scene.placed[i as usize];
-                            let g = placed.instance.geometry;
-                            let geometry = &scene.geometries[g];
-                            let mut object = scene.object_ray(i as usize, ray);
-                            object.tmax = best.t.min(ray.tmax);
-                            let view = SceneRef::new(&geometry.tree, &geometry.triangles).with_links(&scene.links[g]);
-                            let (hit, inner) = trace_ray(&view, &object, traversal);
-                            counts.add_entry(&inner);
-                            if !hit.is_hit() {
-                                incomplete |= hit.prim_id != PRIM_MISS;
-                                continue;
-                            }
-                            if hit.t <= best.t || !best.is_hit() {
-                                best = InstanceHit {
-                                    t: hit.t,
-                                    instance_id: placed.instance.instance_id,
-                                    geometry_id: geometry.id,
-                                    prim_index: hit.prim_id,
-                                    u: hit.u,
-                                    v: hit.v,
-                                    front_face: faces(&geometry.triangles[hit.prim_id as usize], object.traced_dir()),
-                                    instance_index: i,
-                                };
-                                if traversal.any_hit {
-                                    return best;
-                                }
+                            if scene.enter(i, ray, traversal, &mut best, &mut incomplete, counts) {
+                                return best;
                             }
                         }
                         break;
@@ -321,28 +298,6 @@ fn camera(eye: Vec3, at: Vec3, w: usize, h: usize) -> Vec<Ray> {
     rays
 }
 
-/// A ball of `rings` × `segments` quads (closed).
-fn ball(rings: usize, segments: usize) -> Vec<[Vec3; 3]> {
-    let p = |i: usize, j: usize| {
-        let theta = std::f32::consts::PI * i as f32 / rings as f32;
-        let phi = std::f32::consts::TAU * (j % segments) as f32 / segments as f32;
-        Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin())
-    };
-    let mut tris = Vec::new();
-    for i in 0..rings {
-        for j in 0..segments {
-            let (a, b, c, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
-            if i > 0 {
-                tris.push([a, c, d]);
-            }
-            if i + 1 < rings {
-                tris.push([a, b, c]);
-            }
-        }
-    }
-    tris
-}
-
 /// Per-ray means of one top level over a ray set, and its CPU time.
 fn measure(
     name: &str,
@@ -414,7 +369,7 @@ fn top_level_kd_against_bvh() {
         let rays = camera(mid + Vec3::new(0.5, 1.0, -4.0) * size, mid, 160, 120);
         cases.push(("bunny heap of 64".into(), vec![b], heap, rays));
     }
-    // 4,096 balls of 1,200 triangles on a 100 x 100 ground, seen from inside at eye height.
+    // 4,096 bumpy balls of 1,140 triangles on a 100 x 100 ground, seen from inside at eye height.
     let forest: Vec<Instance> = (0..4096)
         .map(|i| {
             let at = Vec3::new(rng.next() * 100.0, 0.0, rng.next() * 100.0);
@@ -423,7 +378,7 @@ fn top_level_kd_against_bvh() {
         })
         .collect();
     let rays = camera(Vec3::new(5.0, 1.0, 5.0), Vec3::new(60.0, 0.5, 50.0), 160, 120);
-    cases.push(("forest of 4,096 balls".into(), vec![BottomLevel::new(0, ball(20, 30), &config)], forest, rays));
+    cases.push(("forest of 4,096 balls".into(), vec![BottomLevel::new(0, sphere(20, 30), &config)], forest, rays));
     // A room (a ball of radius 50 seen from inside) holding 256 small balls:
     // one instance's box holds all the others.
     let mut room = vec![place(1, Affine3A::from_scale(Vec3::splat(50.0)), 0)];
@@ -432,7 +387,7 @@ fn top_level_kd_against_bvh() {
         place(0, Affine3A::from_scale_rotation_translation(Vec3::splat(1.0 + 2.0 * rng.next()), rng.rotation(), at), i)
     }));
     let rays = camera(Vec3::new(0.0, 0.0, -40.0), Vec3::ZERO, 160, 120);
-    let geometries = vec![BottomLevel::new(0, ball(20, 30), &config), BottomLevel::new(1, ball(64, 96), &config)];
+    let geometries = vec![BottomLevel::new(0, sphere(20, 30), &config), BottomLevel::new(1, sphere(64, 96), &config)];
     cases.push(("room of 256 balls".into(), geometries, room, rays));
 
     eprintln!("| scene | instances | top level | top nodes | instances entered | inner nodes | inner triangles | CPU µs/ray |");
