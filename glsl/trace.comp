@@ -198,7 +198,7 @@ void main() {
     // CAREFUL_MAX_GROUPS workgroups.
     bool listed = PASS == PASS_CAREFUL;
     uint id = listed ? careful_slot() : batch_slot(TRACE_WORKGROUP_SIZE);
-    uint count = listed ? careful[3] : batch_count();
+    uint count = listed ? careful[CAREFUL_COUNT] : batch_count();
     if (id >= count) return;
     // The careful pass lists ray indices; an ordered batch traces ray order[id].
     trace_ray(listed ? careful[CAREFUL_HEADER_WORDS + id] : (params.ordered != 0u ? order[id] : id));

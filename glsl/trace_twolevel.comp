@@ -316,7 +316,7 @@ void main() {
     // The careful pass traces the rays the fast pass listed.
     bool from_list = PASS == PASS_CAREFUL;
     uint id = from_list ? careful_slot() : gl_GlobalInvocationID.x;
-    uint count = from_list ? careful[3] : params.ray_count;
+    uint count = from_list ? careful[CAREFUL_COUNT] : params.ray_count;
     if (id >= count) return;
     trace_world(from_list ? careful[CAREFUL_HEADER_WORDS + id] : id);
 }

@@ -198,6 +198,9 @@ pub const ARGS_BINDING_ARGS: u32 = 1;
 pub const ARGS_BINDINGS: u32 = 2;
 /// Words before the ray indices in the careful-pass list.
 pub const CAREFUL_HEADER_WORDS: u32 = 4;
+/// The word of the careful-pass list's header that counts the listed rays
+/// (after the indirect dispatch's x, y, z).
+pub const CAREFUL_COUNT: u32 = 3;
 /// Workgroups per row (x) of the careful pass's indirect dispatch: Vulkan's
 /// guaranteed minimum of `maxComputeWorkGroupCount`; more listed rays take more rows (y).
 pub const CAREFUL_MAX_GROUPS: u32 = 65535;
@@ -326,6 +329,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("RQ_BINDING_RAYS", RQ_BINDING_RAYS),
     ("RQ_BINDING_HITS", RQ_BINDING_HITS),
     ("CAREFUL_HEADER_WORDS", CAREFUL_HEADER_WORDS),
+    ("CAREFUL_COUNT", CAREFUL_COUNT),
     ("CAREFUL_MAX_GROUPS", CAREFUL_MAX_GROUPS),
     ("RASTER_VERTEX_BINDING", RASTER_VERTEX_BINDING),
     ("RASTER_LOCATION_POSITION", RASTER_LOCATION_POSITION),

@@ -11,7 +11,7 @@
 // workgroup at every TRACE_WORKGROUP_SIZE-th ray: the first CAREFUL_MAX_GROUPS
 // in x, then one more row in y per as many.
 void list_for_careful_pass(uint index) {
-    uint slot = atomicAdd(careful[3], 1u);
+    uint slot = atomicAdd(careful[CAREFUL_COUNT], 1u);
     careful[CAREFUL_HEADER_WORDS + slot] = index;
     if (slot % TRACE_WORKGROUP_SIZE == 0u) {
         uint group = slot / TRACE_WORKGROUP_SIZE;

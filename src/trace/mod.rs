@@ -124,8 +124,8 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    CAREFUL_HEADER_WORDS, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS,
-    COUNTER_STEPS, COUNTER_TRIANGLES, TRACE_WORKGROUP_SIZE,
+    CAREFUL_COUNT, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS,
+    COUNTER_TRIANGLES, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -454,7 +454,8 @@ impl Tracer {
             )?
         };
         let timestamps = Timestamps::new(&ctx, 2)?;
-        // The careful pass's count (word CAREFUL_COUNT of its list), copied back per batch.
+        // The careful pass's count (word CAREFUL_COUNT of its list), copied back per batch
+        // (a host round trip `Tracer::trace` makes anyway; recorded bindings have none).
         let careful_count = match &binding.careful {
             Some(_) => Some(Buffer::new(
                 &ctx,
@@ -503,8 +504,7 @@ impl Tracer {
                             &[barrier],
                             &[],
                         );
-                        // The count follows the indirect arguments x, y, z (BINDING_CAREFUL).
-                        let at = (CAREFUL_HEADER_WORDS as u64 - 1) * WORD_BYTES;
+                        let at = CAREFUL_COUNT as u64 * WORD_BYTES;
                         let region = vk::BufferCopy { src_offset: at, dst_offset: 0, size: WORD_BYTES };
                         ctx.device.cmd_copy_buffer(cmd, list.buffer, count.buffer, &[region]);
                     }

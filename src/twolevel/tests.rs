@@ -34,14 +34,14 @@ fn bottom(id: u32, triangles: Vec<[Vec3; 3]>) -> BottomLevel {
     BottomLevel::new(id, triangles, &BuildConfig::default())
 }
 
-struct Rng(u64);
+pub(super) struct Rng(pub(super) u64);
 
 impl Rng {
-    fn next(&mut self) -> f32 {
+    pub(super) fn next(&mut self) -> f32 {
         self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((self.0 >> 40) as f32) / (1u64 << 24) as f32
     }
-    fn unit(&mut self) -> Vec3 {
+    pub(super) fn unit(&mut self) -> Vec3 {
         loop {
             let v = Vec3::new(self.next(), self.next(), self.next()) * 2.0 - Vec3::ONE;
             if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {

@@ -10,7 +10,7 @@
 //! prints the table of docs/EMBEDDING.md (bunny scenes are skipped when
 //! scenes/bunny.obj has not been fetched).
 
-use super::tests::sphere;
+use super::tests::{sphere, Rng};
 use super::*;
 use crate::kdtree::traverse::Variant;
 
@@ -262,23 +262,9 @@ fn sah_bvh(placed: &[Placed], order: &mut [u32], lo: usize, hi: usize, nodes: &m
     index
 }
 
-/// A deterministic generator for the measurement's placements.
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        ((self.0 >> 40) as f32) / (1u64 << 24) as f32
-    }
-    fn rotation(&mut self) -> glam::Quat {
-        let axis = loop {
-            let v = Vec3::new(self.next(), self.next(), self.next()) * 2.0 - Vec3::ONE;
-            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
-                break v.normalize();
-            }
-        };
-        glam::Quat::from_axis_angle(axis, self.next() * std::f32::consts::TAU)
-    }
+/// A random rotation (the tests' generator: the same placements as before it was shared).
+fn rotation(rng: &mut Rng) -> glam::Quat {
+    glam::Quat::from_axis_angle(rng.unit(), rng.next() * std::f32::consts::TAU)
 }
 
 /// Pinhole camera rays from `eye` toward `at`, `w`×`h`, field of view 50°.
@@ -331,7 +317,7 @@ fn top_level_kd_against_bvh() {
     let config = BuildConfig::default();
     let bunny = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bunny.obj");
     let bunny = bunny.exists().then(|| crate::scene::Scene::load(&bunny).unwrap().triangles);
-    let mut rng = Lcg(29);
+    let mut rng = Rng(29);
     let mut cases: Vec<Case> = Vec::new();
     let place = |geometry: usize, transform: Affine3A, i: usize| Instance {
         geometry,
@@ -362,7 +348,7 @@ fn top_level_kd_against_bvh() {
         let heap: Vec<Instance> = (0..64)
             .map(|i| {
                 let at = Vec3::new(rng.next(), rng.next(), rng.next()) * 2.0 * size;
-                place(0, Affine3A::from_rotation_translation(rng.rotation(), at - centre), i)
+                place(0, Affine3A::from_rotation_translation(rotation(&mut rng), at - centre), i)
             })
             .collect();
         let mid = Vec3::splat(size);
@@ -374,7 +360,7 @@ fn top_level_kd_against_bvh() {
         .map(|i| {
             let at = Vec3::new(rng.next() * 100.0, 0.0, rng.next() * 100.0);
             let s = 0.3 + rng.next();
-            place(0, Affine3A::from_scale_rotation_translation(Vec3::new(s, 2.0 * s, s), rng.rotation(), at), i)
+            place(0, Affine3A::from_scale_rotation_translation(Vec3::new(s, 2.0 * s, s), rotation(&mut rng), at), i)
         })
         .collect();
     let rays = camera(Vec3::new(5.0, 1.0, 5.0), Vec3::new(60.0, 0.5, 50.0), 160, 120);
@@ -384,7 +370,11 @@ fn top_level_kd_against_bvh() {
     let mut room = vec![place(1, Affine3A::from_scale(Vec3::splat(50.0)), 0)];
     room.extend((1..257).map(|i| {
         let at = (Vec3::new(rng.next(), rng.next(), rng.next()) * 2.0 - Vec3::ONE) * 25.0;
-        place(0, Affine3A::from_scale_rotation_translation(Vec3::splat(1.0 + 2.0 * rng.next()), rng.rotation(), at), i)
+        place(
+            0,
+            Affine3A::from_scale_rotation_translation(Vec3::splat(1.0 + 2.0 * rng.next()), rotation(&mut rng), at),
+            i,
+        )
     }));
     let rays = camera(Vec3::new(0.0, 0.0, -40.0), Vec3::ZERO, 160, 120);
     let geometries = vec![BottomLevel::new(0, sphere(20, 30), &config), BottomLevel::new(1, sphere(64, 96), &config)];
