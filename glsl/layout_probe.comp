@@ -35,6 +35,8 @@ void main() {
     put(node_axis(interior));
     put(node_split(interior));
     put(node_above_child(interior));
+    put(node_below_empty(interior) ? 1u : 0u);
+    put(node_above_empty(interior) ? 1u : 0u);
     uvec2 leaf = nodes[2];
     put(node_is_leaf(leaf) ? 1u : 0u);
     put(node_prim_count(leaf));

@@ -28,11 +28,18 @@ pub const SHIFT_DIAGONALS: u32 = 16;
 /// Largest short stack (`short-stack` variants); the paper used 3.
 pub const MAX_SHORT_STACK: u32 = 8;
 /// The 8-byte kd-tree node (`KdNode`, `glsl/shared/kdnode.glsl`): bits of its
-/// second word that hold the split axis (0..=2) or `NODE_LEAF`; the bits above
-/// hold the above child's index (interior) or the primitive count (leaf).
+/// second word that hold the split axis (0..=2) or `NODE_LEAF`; in a leaf, the
+/// bits above hold the primitive count.
 pub const NODE_TAG_BITS: u32 = 2;
 /// The tag (low `NODE_TAG_BITS` of the second word) of a leaf.
 pub const NODE_LEAF: u32 = 3;
+/// Interior node, second word: set when the below child is an empty leaf.
+pub const NODE_BELOW_EMPTY: u32 = 1 << 2;
+/// Interior node, second word: set when the above child is an empty leaf.
+pub const NODE_ABOVE_EMPTY: u32 = 1 << 3;
+/// Interior node, second word: the above child's index starts at this bit
+/// (below it: the axis and the two empty-child flags).
+pub const NODE_CHILD_SHIFT: u32 = 4;
 /// `ropes` entry of a face on the scene boundary.
 pub const NO_ROPE: u32 = 0xFFFF_FFFF;
 
@@ -265,6 +272,9 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("SHIFT_DIAGONALS", SHIFT_DIAGONALS),
     ("NODE_TAG_BITS", NODE_TAG_BITS),
     ("NODE_LEAF", NODE_LEAF),
+    ("NODE_BELOW_EMPTY", NODE_BELOW_EMPTY),
+    ("NODE_ABOVE_EMPTY", NODE_ABOVE_EMPTY),
+    ("NODE_CHILD_SHIFT", NODE_CHILD_SHIFT),
     ("NO_ROPE", NO_ROPE),
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),

@@ -163,19 +163,25 @@ fn gpu_reads_every_field_where_rust_wrote_it() {
     let mut probe = Probe::new(&ctx);
     probe.element::<Ray>(PROBE_BINDING_RAYS, distinct(1));
     probe.element::<Hit>(PROBE_BINDING_HITS, distinct(2));
-    // The kd-tree node is a `uvec2` decoded by kdnode.glsl: an interior node and a leaf.
-    let nodes = [KdNode::leaf(0, 0), KdNode::interior(2, -17.5, 98_765), KdNode::leaf(4321, 77)];
+    // The kd-tree node is a `uvec2` decoded by kdnode.glsl: an interior node (its
+    // above child flagged as an empty leaf) and a leaf.
+    let mut interior = KdNode::interior(2, -17.5, 98_765);
+    interior.word1 |= kdtrace::consts::NODE_ABOVE_EMPTY;
+    let nodes = [KdNode::leaf(0, 0), interior, KdNode::leaf(4321, 77)];
     probe.raw(PROBE_BINDING_NODES, &nodes);
     probe.expected.extend([
         0,
         nodes[1].axis() as u32,
         nodes[1].split().to_bits(),
         nodes[1].above_child(),
+        nodes[1].below_empty() as u32,
+        nodes[1].above_empty() as u32,
         1,
         nodes[2].prim_count(),
         nodes[2].prim_offset(),
     ]);
     assert_eq!((nodes[1].axis(), nodes[1].split(), nodes[1].above_child()), (2, -17.5, 98_765));
+    assert_eq!((nodes[1].below_empty(), nodes[1].above_empty()), (false, true));
     assert_eq!((nodes[2].prim_count(), nodes[2].prim_offset()), (77, 4321));
     probe.element::<RasterView>(PROBE_BINDING_RASTER_VIEWS, distinct(3));
     let params: TraceParams = distinct(4);

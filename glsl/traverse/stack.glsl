@@ -1,5 +1,9 @@
 // `stack`: front-to-back traversal with a full per-ray stack of (node, t0, t1)
 // (pbrt-v3's KdTreeAccel::Intersect). The baseline every variant is compared to.
+// Beyond pbrt and the paper, and unlike the other variants, it neither pushes nor
+// fetches a child that its parent flags as an empty leaf (NODE_BELOW_EMPTY,
+// NODE_ABOVE_EMPTY), and it ends at a popped entry that starts behind the closest
+// hit (entries lie front to back unless the ray lay in a split plane).
 // CPU twin: `trace_stack` in src/kdtree/traverse/stack.rs.
 #ifndef TRAVERSE_STACK_GLSL
 #define TRAVERSE_STACK_GLSL
@@ -23,55 +27,67 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
     float stack_t0[MAX_STACK];  // entries' segments [t0, t1] (see stack_entry.glsl)
     float stack_t1[MAX_STACK];
     uint sp = 0u;
+    bool in_plane = false;  // a VISIT_BOTH_SAME entry was pushed
     uint node = 0u;
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
         uvec2 n = fetch_node(node, c);
         ++step;
-        // Descend to a leaf with triangles. An empty leaf that does not end the
-        // traversal is left here, popping the next entry: the lane keeps descending
-        // instead of waiting for the others' triangle tests.
-        if (descends(n, t1, best)) do {
-            if (node_is_leaf(n)) {
-                c.leaves += 1u;
+        // Descend to a leaf. A child that the parent's flags mark as an empty leaf
+        // is neither pushed nor fetched: the lane pops the next entry and keeps
+        // descending instead of waiting for the others' triangle tests. So the only
+        // empty leaf ever fetched is a root that is one (an empty scene).
+        if (!node_is_leaf(n)) do {
+            uint near, far;
+            float ts;
+            uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
+            bool below_near = near == node + 1u;
+            bool near_empty = below_near ? node_below_empty(n) : node_above_empty(n);
+            bool far_empty = below_near ? node_above_empty(n) : node_below_empty(n);
+            bool both = visit >= VISIT_BOTH;
+            // VISIT_BOTH: near gets [t0, ts], far [ts, t1]; VISIT_BOTH_SAME: both [t0, t1].
+            float near_t1 = visit == VISIT_BOTH ? ts : t1;
+            float far_t0 = visit == VISIT_BOTH ? ts : t0;
+            bool pop = false;
+            if (both && !near_empty && !far_empty) {
+                stack_node[sp] = far;
+                stack_t0[sp] = far_t0;
+                stack_t1[sp] = t1;
+                ++sp;
+                in_plane = in_plane || visit == VISIT_BOTH_SAME;
+                node = near;
+                t1 = near_t1;
+            } else if (visit == VISIT_NEAR || (both && far_empty)) {
+                node = near;
+                t1 = near_t1;
+                pop = near_empty;
+            } else {
+                // VISIT_FAR, or both with the near child an empty leaf.
+                node = far;
+                t0 = far_t0;
+                pop = far_empty;
+            }
+            if (pop) {
+                // Entries lie front to back (each starts where the one above it
+                // ends, or later), so one that starts at or behind the closest hit's
+                // reach ends the traversal: nothing closer lies behind it. Not so
+                // once the ray lay in a split plane (VISIT_BOTH_SAME: an entry
+                // starting where its sibling does, below entries that start later);
+                // such a ray goes on through every entry.
                 if (sp == 0u) return true;
                 --sp;
                 node = stack_node[sp];
                 t0 = stack_t0[sp];
                 t1 = stack_t1[sp];
-            } else {
-                uint near, far;
-                float ts;
-                uint visit = decide_children(r, node, n, t0, t1, NO_PLANE, near, far, ts);
-                if (visit == VISIT_NEAR) {
-                    node = near;
-                } else if (visit == VISIT_FAR) {
-                    node = far;
-                } else {
-                    // VISIT_BOTH: far gets [ts, t1]; VISIT_BOTH_SAME: far gets [t0, t1].
-                    stack_node[sp] = far;
-                    stack_t0[sp] = visit == VISIT_BOTH ? ts : t0;
-                    stack_t1[sp] = t1;
-                    ++sp;
-                    node = near;
-                    if (visit == VISIT_BOTH) t1 = ts;
-                }
+                if (!ANY_HIT && !in_plane && !(t0 < best_reach(best))) return true;
             }
             if (step >= MAX_TRAVERSAL_STEPS) return false;
             n = fetch_node(node, c);
             ++step;
-        } while (descends(n, t1, best));
+        } while (!node_is_leaf(n));
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
-        if (leaf == LEAF_DONE) {
-            if (ANY_HIT) return true;
-            // A closer hit can only lie in an entry that starts before this one: the
-            // other side of a split plane the ray lies in (VISIT_BOTH_SAME) has the
-            // same segment as the leaf just done. Drop the entries behind the hit.
-            if (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best))) do {
-                --sp;
-            } while (sp > 0u && !(stack_t0[sp - 1u] < best_reach(best)));
-        }
+        if (ANY_HIT && leaf == LEAF_DONE) return true;
         // A second pop site, on purpose: leaving visited leaves through the
         // descent's pop (one site) costs more instructions on SIMD drivers, as every
         // lane then enters the descent at a pop (see docs/BENCH.md).
@@ -79,7 +95,8 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
         --sp;
         node = stack_node[sp];
         t0 = stack_t0[sp];
-                t1 = stack_t1[sp];
+        t1 = stack_t1[sp];
+        if (!ANY_HIT && !in_plane && !(t0 < best_reach(best))) return true;
     }
     return false;
 }

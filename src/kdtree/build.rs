@@ -109,7 +109,7 @@ impl KdTree {
     ///
     /// # Panics
     /// If `triangles` has 2³⁰ or more non-skipped entries or `PRIM_INCOMPLETE`
-    /// (2³² − 3) or more in all, or the tree outgrows the node's 30-bit fields.
+    /// (2³² − 3) or more in all, or the tree outgrows the node's fields (2²⁸ nodes, 2³⁰ primitives per leaf).
     pub fn build(triangles: &[[Vec3; 3]], config: &BuildConfig) -> KdTree {
         Self::build_with_progress(triangles, config, None)
     }
@@ -143,7 +143,8 @@ impl KdTree {
 
         let ctx = sah::Ctx::new(triangles, &boxes, config, max_depth, progress);
         stage(BuildStage::Splitting);
-        let (nodes, prim_indices) = sah::build(&ctx, included, bounds);
+        let (mut nodes, prim_indices) = sah::build(&ctx, included, bounds);
+        super::node::mark_empty_children(&mut nodes);
         let build_seconds = start.elapsed().as_secs_f64();
         stage(BuildStage::Statistics);
         let mut tree = KdTree { nodes, prim_indices, bounds, stats: BuildStats::default() };

@@ -13,7 +13,7 @@
 //! [`CacheError`], never a panic; [`load_or_build`] then rebuilds and replaces
 //! the file.
 //!
-//! # Format, version 1
+//! # Format, version 2 (version 1: interior nodes without the empty-child flags, the above child at bit 2)
 //!
 //! All numbers little-endian (kdtrace targets little-endian machines, as its
 //! GPU upload does), no padding:
@@ -53,7 +53,7 @@ use rayon::prelude::*;
 
 use super::build::BuildProgress;
 use super::config::BuildConfig;
-use super::node::{KdNode, MAX_NODE_FIELD};
+use super::node::{mark_empty_children, KdNode, MAX_CHILD_INDEX};
 use super::stats::BuildStats;
 use super::tree::KdTree;
 use crate::geom::Aabb;
@@ -63,7 +63,7 @@ pub const MAGIC: [u8; 8] = *b"KDTCACHE";
 
 /// The version of the file format; bumped whenever the layout or the meaning of
 /// a field changes, which invalidates every older file.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Bytes before the node array.
 pub const HEADER_BYTES: usize = 112;
@@ -365,13 +365,13 @@ impl Header {
             }
         }
 
-        // Counts: bounded by what a tree can hold (node fields are 30 bits,
-        // leaf offsets 32), not yet by the data present (see `read_pod_vec`).
+        // Counts: bounded by what a tree can hold (2^28 nodes, leaf offsets 32
+        // bits), not yet by the data present (see `read_pod_vec`).
         let bad = |message: String| Err(CacheError::BadHeader(message));
         if header.included > header.key.triangle_count {
             return bad(format!("{} triangles in the tree of {}", header.included, header.key.triangle_count));
         }
-        if header.nodes == 0 || header.nodes > MAX_NODE_FIELD as u64 + 1 {
+        if header.nodes == 0 || header.nodes > MAX_CHILD_INDEX as u64 + 1 {
             return bad(format!("{} nodes", header.nodes));
         }
         if header.prims > u32::MAX as u64 {
@@ -505,6 +505,8 @@ impl KdTree {
         let triangle_count = header.key.triangle_count as usize;
         let mut tree = KdTree { nodes, prim_indices, bounds: header.bounds, stats: BuildStats::default() };
         tree.check(triangle_count).map_err(CacheError::BadTree)?;
+        // The empty-child flags are derived, never trusted from the file.
+        mark_empty_children(&mut tree.nodes);
         let included = header.included as usize;
         tree.stats = BuildStats::compute(&tree, config, included, triangle_count - included, header.build_seconds);
         tree.stats.peak_scratch_bytes = header.peak_scratch_bytes as usize;
@@ -749,7 +751,7 @@ mod tests {
             KdTree::read_from(&mut b.as_slice(), &key, &config).unwrap_err()
         };
         assert!(matches!(with(0, b"KDTCACHX"), CacheError::BadMagic { .. }));
-        assert!(matches!(with(8, &2u32.to_le_bytes()), CacheError::Version { found: 2 }));
+        assert!(matches!(with(8, &1u32.to_le_bytes()), CacheError::Version { found: 1 }));
         assert!(matches!(with(12, &1u32.to_le_bytes()), CacheError::BadHeader(_)));
         assert!(matches!(with(16, &0u64.to_le_bytes()), CacheError::KeyMismatch { what: "scene", .. }));
         assert!(matches!(with(24, &0u64.to_le_bytes()), CacheError::KeyMismatch { what: "configuration", .. }));
@@ -760,9 +762,9 @@ mod tests {
         assert!(matches!(with(56, &(1u64 << 40).to_le_bytes()), CacheError::BadHeader(_)));
         assert!(matches!(with(64, &f32::NAN.to_le_bytes()), CacheError::BadBounds(_)));
         assert!(matches!(with(88, &(-1.0f64).to_le_bytes()), CacheError::BadHeader(_)));
-        // A node count at the 30-bit limit reads into the end of the file
+        // A node count at the 28-bit limit reads into the end of the file
         // without allocating gigabytes first.
-        let e = with(48, &(MAX_NODE_FIELD as u64 + 1).to_le_bytes());
+        let e = with(48, &(MAX_CHILD_INDEX as u64 + 1).to_le_bytes());
         assert!(matches!(e, CacheError::Truncated { found, .. } if found == good.len() as u64), "{e}");
     }
 }

@@ -23,7 +23,7 @@ use glam::Vec3;
 use super::clip::clip_triangle_split;
 use super::{BuildConfig, BuildProgress, Builder};
 use crate::geom::Aabb;
-use crate::kdtree::node::{KdNode, MAX_NODE_FIELD};
+use crate::kdtree::node::{KdNode, MAX_CHILD_INDEX, MAX_NODE_FIELD};
 
 mod binned;
 
@@ -650,7 +650,7 @@ fn build_serial(
     meter.live = meter.live + child_bytes - parent_bytes;
     build_serial(ctx, below, below_box, depth + 1, bad_refines, scratch, meter, out);
     let above_index = out.nodes.len();
-    assert!(above_index <= MAX_NODE_FIELD as usize, "kd-tree too large: more than {MAX_NODE_FIELD} nodes");
+    assert!(above_index <= MAX_CHILD_INDEX as usize, "kd-tree too large: more than {MAX_CHILD_INDEX} nodes");
     out.nodes[index] = KdNode::interior(split.axis, split.pos, above_index as u32);
     build_serial(ctx, above, above_box, depth + 1, bad_refines, scratch, meter, out);
 }
@@ -703,8 +703,8 @@ fn flatten(part: Part, nodes: &mut Vec<KdNode>, prims: &mut Vec<u32>) {
         Part::Chunk(chunk) => {
             let (node_base, prim_base) = (nodes.len(), prims.len());
             assert!(
-                node_base + chunk.nodes.len() <= MAX_NODE_FIELD as usize + 1,
-                "kd-tree too large: more than {MAX_NODE_FIELD} nodes"
+                node_base + chunk.nodes.len() <= MAX_CHILD_INDEX as usize + 1,
+                "kd-tree too large: more than {MAX_CHILD_INDEX} nodes"
             );
             let prim_base = u32::try_from(prim_base).expect("more than 2^32 primitive references");
             nodes.extend(chunk.nodes.iter().map(|n| {
@@ -721,7 +721,7 @@ fn flatten(part: Part, nodes: &mut Vec<KdNode>, prims: &mut Vec<u32>) {
             nodes.push(KdNode::interior(axis, pos, 0));
             flatten(*below, nodes, prims);
             let above_index = nodes.len();
-            assert!(above_index <= MAX_NODE_FIELD as usize, "kd-tree too large: more than {MAX_NODE_FIELD} nodes");
+            assert!(above_index <= MAX_CHILD_INDEX as usize, "kd-tree too large: more than {MAX_CHILD_INDEX} nodes");
             nodes[index] = KdNode::interior(axis, pos, above_index as u32);
             flatten(*above, nodes, prims);
         }

@@ -4,7 +4,7 @@ use super::*;
 use crate::consts::{MAX_TREE_DEPTH, PRIM_MISS};
 use crate::exact::tolerant::{agrees, Agreement};
 use crate::geom::{Hit, Ray, WatertightRay};
-use crate::kdtree::node::{KdNode, MAX_NODE_FIELD};
+use crate::kdtree::node::{mark_empty_children, KdNode, MAX_CHILD_INDEX, MAX_NODE_FIELD};
 use crate::kdtree::traverse::{trace_ray, SceneRef, Variant};
 use crate::raygen::SplitMix64;
 use glam::DVec3;
@@ -350,11 +350,21 @@ fn compare_with_reference(name: &str, tris: &[[Vec3; 3]], config: &BuildConfig, 
 #[test]
 fn node_encoding_round_trip() {
     for (axis, split, above) in
-        [(0, 0.0, 2), (1, -0.0, 7), (2, -1.5e-30, MAX_NODE_FIELD), (0, 3.4e38, 123_456), (1, f32::MIN_POSITIVE, 5)]
+        [(0, 0.0, 2), (1, -0.0, 7), (2, -1.5e-30, MAX_CHILD_INDEX), (0, 3.4e38, 123_456), (1, f32::MIN_POSITIVE, 5)]
     {
         let n = KdNode::interior(axis, split, above);
         assert!(!n.is_leaf());
+        assert!(!n.below_empty() && !n.above_empty());
         assert_eq!((n.axis(), n.split().to_bits(), n.above_child()), (axis, split.to_bits(), above));
+        // The empty-child flags sit between the axis and the child index.
+        for flags in [crate::consts::NODE_BELOW_EMPTY, crate::consts::NODE_ABOVE_EMPTY] {
+            let f = KdNode { word1: n.word1 | flags, ..n };
+            assert_eq!((f.axis(), f.above_child(), f.is_leaf()), (axis, above, false));
+            assert_eq!(
+                (f.below_empty(), f.above_empty()),
+                (flags == crate::consts::NODE_BELOW_EMPTY, flags == crate::consts::NODE_ABOVE_EMPTY)
+            );
+        }
     }
     for (offset, count) in [(0, 0), (5, 1), (u32::MAX, MAX_NODE_FIELD), (17, 1000)] {
         let n = KdNode::leaf(offset, count);
@@ -362,6 +372,29 @@ fn node_encoding_round_trip() {
         assert_eq!((n.prim_offset(), n.prim_count()), (offset, count));
     }
     assert_eq!(std::mem::size_of::<KdNode>(), 8);
+}
+
+/// Every interior node of a built tree flags exactly its children that are
+/// empty leaves, and marking again changes nothing.
+#[test]
+fn empty_children_are_flagged() {
+    let tris = soup(7, 2000, 0.05);
+    let tree = KdTree::build(&tris, &BuildConfig::default());
+    let mut flagged = 0;
+    for (i, n) in tree.nodes.iter().enumerate() {
+        if n.is_leaf() {
+            continue;
+        }
+        let below = tree.nodes[i + 1];
+        let above = tree.nodes[n.above_child() as usize];
+        assert_eq!(n.below_empty(), below.is_leaf() && below.prim_count() == 0, "node {i}");
+        assert_eq!(n.above_empty(), above.is_leaf() && above.prim_count() == 0, "node {i}");
+        flagged += n.below_empty() as usize + n.above_empty() as usize;
+    }
+    assert!(flagged > 0, "the test tree has no empty leaf");
+    let mut again = tree.nodes.clone();
+    mark_empty_children(&mut again);
+    assert_eq!(again, tree.nodes);
 }
 
 #[test]

@@ -6,46 +6,53 @@ use super::leaf::starts_before;
 use super::State;
 use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS};
 
-/// Twin of `trace_stack` in glsl/traverse/stack.glsl.
+/// Twin of `trace_stack` in glsl/traverse/stack.glsl: children that the parent's
+/// flags mark as empty leaves are neither pushed nor fetched, and a popped entry
+/// that starts at or behind the closest hit's reach ends the traversal (unless
+/// the ray lay in a split plane: see the kernel).
 pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     let mut stack = [(0u32, 0f32, 0f32); MAX_STACK as usize];
     let mut sp = 0usize;
+    let mut in_plane = false;
     let mut node = 0u32;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
         if !n.is_leaf() {
             let (visit, near, far, ts) = decide_children(s.r, node, n, t0, t1, ExitPlane::None);
-            match visit {
-                Visit::Near => node = near,
-                Visit::Far => node = far,
-                Visit::BothSame => {
-                    stack[sp] = (far, t0, t1);
-                    sp += 1;
-                    node = near;
-                }
-                Visit::Both => {
-                    stack[sp] = (far, ts, t1);
-                    sp += 1;
-                    node = near;
-                    t1 = ts;
-                }
+            let (near_empty, far_empty) =
+                if near == node + 1 { (n.below_empty(), n.above_empty()) } else { (n.above_empty(), n.below_empty()) };
+            let (near_t1, far_t0) = if visit == Visit::Both { (ts, ts) } else { (t1, t0) };
+            let both = matches!(visit, Visit::Both | Visit::BothSame);
+            let skip = if both && !near_empty && !far_empty {
+                stack[sp] = (far, far_t0, t1);
+                sp += 1;
+                in_plane |= visit == Visit::BothSame;
+                node = near;
+                t1 = near_t1;
+                false
+            } else if visit == Visit::Near || (both && far_empty) {
+                node = near;
+                t1 = near_t1;
+                near_empty
+            } else {
+                node = far;
+                t0 = far_t0;
+                far_empty
+            };
+            if !skip {
+                continue;
             }
-            continue;
-        }
-        if s.leaf(n, t1) {
-            if s.r.any_hit {
-                return true;
-            }
-            // Only entries starting before the hit can hold a closer one (stack.glsl).
-            while sp > 0 && !starts_before(stack[sp - 1].1, s.reach()) {
-                sp -= 1;
-            }
+        } else if s.leaf(n, t1) && s.r.any_hit {
+            return true;
         }
         if sp == 0 {
             return true;
         }
         sp -= 1;
         (node, t0, t1) = stack[sp];
+        if !s.r.any_hit && !in_plane && !starts_before(t0, s.reach()) {
+            return true;
+        }
     }
     false
 }
