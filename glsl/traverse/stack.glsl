@@ -2,8 +2,8 @@
 // (pbrt-v3's KdTreeAccel::Intersect). The baseline every variant is compared to.
 // Beyond pbrt and the paper, and unlike the other variants, it neither pushes nor
 // fetches a child that its parent flags as an empty leaf (NODE_BELOW_EMPTY,
-// NODE_ABOVE_EMPTY), and it ends at a popped entry that starts behind the closest
-// hit (entries lie front to back unless the ray lay in a split plane).
+// NODE_ABOVE_EMPTY), and it skips every entry that starts behind the closest hit
+// at each pop (not only after the leaf of the hit).
 // CPU twin: `trace_stack` in src/kdtree/traverse/stack.rs.
 #ifndef TRAVERSE_STACK_GLSL
 #define TRAVERSE_STACK_GLSL
@@ -27,7 +27,6 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
     float stack_t0[MAX_STACK];  // entries' segments [t0, t1] (see stack_entry.glsl)
     float stack_t1[MAX_STACK];
     uint sp = 0u;
-    bool in_plane = false;  // a VISIT_BOTH_SAME entry was pushed
     uint node = 0u;
     uint step = 0u;
     while (step < MAX_TRAVERSAL_STEPS) {
@@ -54,7 +53,6 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
                 stack_t0[sp] = far_t0;
                 stack_t1[sp] = t1;
                 ++sp;
-                in_plane = in_plane || visit == VISIT_BOTH_SAME;
                 node = near;
                 t1 = near_t1;
             } else if (visit == VISIT_NEAR || (both && far_empty)) {
@@ -62,24 +60,23 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
                 t1 = near_t1;
                 pop = near_empty;
             } else {
-                // VISIT_FAR, or both with the near child an empty leaf.
+                // VISIT_FAR, or both with the near child an empty leaf (then the
+                // far segment may start behind the closest hit: nothing closer there).
                 node = far;
                 t0 = far_t0;
-                pop = far_empty;
+                pop = far_empty || (both && !(far_t0 < best_reach(best)));
             }
             if (pop) {
-                // Entries lie front to back (each starts where the one above it
-                // ends, or later), so one that starts at or behind the closest hit's
-                // reach ends the traversal: nothing closer lies behind it. Not so
-                // once the ray lay in a split plane (VISIT_BOTH_SAME: an entry
-                // starting where its sibling does, below entries that start later);
-                // such a ray goes on through every entry.
-                if (sp == 0u) return true;
-                --sp;
+                // The next entry that starts before the closest hit's reach: only
+                // such an entry can hold a closer hit. (Not the top one alone: an
+                // entry of a split plane the ray lies in starts where its sibling does.)
+                do {
+                    if (sp == 0u) return true;
+                    --sp;
+                    t0 = stack_t0[sp];
+                } while (!(t0 < best_reach(best)));
                 node = stack_node[sp];
-                t0 = stack_t0[sp];
                 t1 = stack_t1[sp];
-                if (!ANY_HIT && !in_plane && !(t0 < best_reach(best))) return true;
             }
             if (step >= MAX_TRAVERSAL_STEPS) return false;
             n = fetch_node(node, c);
@@ -91,12 +88,13 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
         // A second pop site, on purpose: leaving visited leaves through the
         // descent's pop (one site) costs more instructions on SIMD drivers, as every
         // lane then enters the descent at a pop (see docs/BENCH.md).
-        if (sp == 0u) return true;
-        --sp;
+        do {
+            if (sp == 0u) return true;
+            --sp;
+            t0 = stack_t0[sp];
+        } while (!(t0 < best_reach(best)));
         node = stack_node[sp];
-        t0 = stack_t0[sp];
         t1 = stack_t1[sp];
-        if (!ANY_HIT && !in_plane && !(t0 < best_reach(best))) return true;
     }
     return false;
 }

@@ -145,6 +145,7 @@ pub use binding::TraceBinding;
 pub(crate) use binding::{buffer_barrier, record_fast_then_careful};
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES, WORD_BYTES};
+pub(crate) use pipelines::compile_passes;
 use pipelines::TraceKernels;
 pub use pipelines::TracePipelines;
 pub use scene::scene_device_bytes;

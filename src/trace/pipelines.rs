@@ -166,24 +166,11 @@ impl TracePipelines {
                 (TRACE_SPEC_PASS, pass),
             ])
         };
-        let kernels = if key.robust && !key.uses_packets() {
-            // Robust single rays: the fast and the careful pass, compiled side by side.
-            let (fast_spec, careful_spec) = (spec(PASS_FAST), spec(PASS_CAREFUL));
-            let ctx = &self.ctx;
-            let (main, careful) = std::thread::scope(|s| {
-                let careful =
-                    s.spawn(|| Kernel::new(ctx, &KernelDesc { spec_constants: &careful_spec, ..desc.clone() }));
-                let main = Kernel::new(ctx, &KernelDesc { spec_constants: &fast_spec, ..desc.clone() });
-                (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-            });
-            TraceKernels { main: main?, careful: Some(careful?) }
-        } else {
-            let one = spec(PASS_ONE);
-            TraceKernels {
-                main: Kernel::new(&self.ctx, &KernelDesc { spec_constants: &one, ..desc.clone() })?,
-                careful: None,
-            }
-        };
+        let ctx = &self.ctx;
+        let (main, careful) = compile_passes(key.robust && !key.uses_packets(), |pass| {
+            Kernel::new(ctx, &KernelDesc { spec_constants: &spec(pass), ..desc.clone() })
+        })?;
+        let kernels = TraceKernels { main, careful };
         self.kernels.push(((Backend::KdTree, key, counters), Arc::new(kernels)));
         Ok(self.kernels.len() - 1)
     }
@@ -214,4 +201,22 @@ impl TracePipelines {
 pub(super) struct TraceKernels {
     pub(super) main: Kernel,
     pub(super) careful: Option<Kernel>,
+}
+
+/// A kernel's passes from `compile(pass)`: with `two_passes` (robust single
+/// rays) the fast and the careful pass, compiled side by side on two threads;
+/// else the one pass. Shared by [`TracePipelines`] and the two-level tracer.
+pub(crate) fn compile_passes(
+    two_passes: bool,
+    compile: impl Fn(u32) -> Result<Kernel> + Sync,
+) -> Result<(Kernel, Option<Kernel>)> {
+    if !two_passes {
+        return Ok((compile(PASS_ONE)?, None));
+    }
+    let (main, careful) = std::thread::scope(|s| {
+        let careful = s.spawn(|| compile(PASS_CAREFUL));
+        let main = compile(PASS_FAST);
+        (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
+    });
+    Ok((main?, Some(careful?)))
 }

@@ -13,11 +13,10 @@ use gpu_allocator::MemoryLocation;
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    CAREFUL_HEADER_WORDS, MAX_TOP_STACK, PASS_CAREFUL, PASS_FAST, PASS_ONE, TL_BINDINGS, TL_BINDING_CAREFUL,
-    TL_BINDING_GEOMETRIES, TL_BINDING_HITS, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
-    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
-    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
-    TRACE_WORKGROUP_SIZE,
+    CAREFUL_HEADER_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES, TL_BINDING_HITS,
+    TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP, TL_BINDING_TRIANGLES,
+    TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH,
+    TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
@@ -587,15 +586,8 @@ impl TwoLevelTracer {
 /// The pipelines of `key` (normalized) for a scene of one instance or any: for
 /// robust traces the fast and the careful pass, compiled side by side.
 fn compile_passes(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<Passes> {
-    if !key.robust {
-        return Ok(Passes { main: compile(ctx, key, one_instance, PASS_ONE)?, careful: None });
-    }
-    let (main, careful) = std::thread::scope(|s| {
-        let careful = s.spawn(|| compile(ctx, key, one_instance, PASS_CAREFUL));
-        let main = compile(ctx, key, one_instance, PASS_FAST);
-        (main, careful.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)))
-    });
-    Ok(Passes { main: main?, careful: Some(careful?) })
+    let (main, careful) = crate::trace::compile_passes(key.robust, |pass| compile(ctx, key, one_instance, pass))?;
+    Ok(Passes { main, careful })
 }
 
 /// The two-level pipeline of `key` (normalized) and `pass`, for a scene of one

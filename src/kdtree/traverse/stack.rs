@@ -7,13 +7,11 @@ use super::State;
 use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS};
 
 /// Twin of `trace_stack` in glsl/traverse/stack.glsl: children that the parent's
-/// flags mark as empty leaves are neither pushed nor fetched, and a popped entry
-/// that starts at or behind the closest hit's reach ends the traversal (unless
-/// the ray lay in a split plane: see the kernel).
+/// flags mark as empty leaves are neither pushed nor fetched, and entries that
+/// start at or behind the closest hit's reach are skipped at each pop.
 pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
     let mut stack = [(0u32, 0f32, 0f32); MAX_STACK as usize];
     let mut sp = 0usize;
-    let mut in_plane = false;
     let mut node = 0u32;
     for _ in 0..MAX_TRAVERSAL_STEPS {
         let n = s.fetch(node);
@@ -26,7 +24,6 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
             let skip = if both && !near_empty && !far_empty {
                 stack[sp] = (far, far_t0, t1);
                 sp += 1;
-                in_plane |= visit == Visit::BothSame;
                 node = near;
                 t1 = near_t1;
                 false
@@ -37,7 +34,7 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
             } else {
                 node = far;
                 t0 = far_t0;
-                far_empty
+                far_empty || (both && !starts_before(far_t0, s.reach()))
             };
             if !skip {
                 continue;
@@ -45,14 +42,17 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
         } else if s.leaf(n, t1) && s.r.any_hit {
             return true;
         }
-        if sp == 0 {
-            return true;
+        // The next entry that starts before the closest hit's reach (stack.glsl).
+        loop {
+            if sp == 0 {
+                return true;
+            }
+            sp -= 1;
+            if starts_before(stack[sp].1, s.reach()) {
+                break;
+            }
         }
-        sp -= 1;
         (node, t0, t1) = stack[sp];
-        if !s.r.any_hit && !in_plane && !starts_before(t0, s.reach()) {
-            return true;
-        }
     }
     false
 }
