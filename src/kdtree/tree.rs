@@ -119,6 +119,11 @@ impl KdTree {
                 if !node.split().is_finite() {
                     return Err(format!("node {index}: split {}", node.split()));
                 }
+                // A set flag skips its child's triangles (stack.glsl): it must be true.
+                let empty = |i: usize| self.nodes.get(i).is_some_and(|c| c.is_empty_leaf());
+                if (node.below_empty() && !empty(index + 1)) || (node.above_empty() && !empty(above)) {
+                    return Err(format!("node {index}: flags a child with triangles as an empty leaf"));
+                }
                 stack.push((above, depth + 1));
                 stack.push((index + 1, depth + 1));
             }

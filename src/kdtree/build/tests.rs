@@ -395,6 +395,12 @@ fn empty_children_are_flagged() {
     let mut again = tree.nodes.clone();
     mark_empty_children(&mut again);
     assert_eq!(again, tree.nodes);
+    // A flag on a child with triangles would skip them: `check` refuses it.
+    let mut bad = tree.clone();
+    let i = bad.nodes.iter().position(|n| !n.is_leaf() && !n.below_empty()).unwrap();
+    bad.nodes[i].word1 |= crate::consts::NODE_BELOW_EMPTY;
+    assert!(tree.check(tris.len()).is_ok());
+    assert!(bad.check(tris.len()).unwrap_err().contains("empty leaf"));
 }
 
 #[test]
