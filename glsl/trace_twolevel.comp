@@ -87,6 +87,11 @@ layout(std430, set = 0, binding = TL_BINDING_CAREFUL) coherent buffer Careful { 
 
 layout(push_constant) uniform Push { TwoLevelParams params; };
 
+// A device-counted batch's arguments, when params.indirect (glsl/indirect_args.comp).
+layout(std430, set = 0, binding = TL_BINDING_INDIRECT) readonly buffer Indirect { uint indirect_words[]; };
+
+#include "batch.glsl"
+
 const float FLT_MIN_NORMAL = 1.17549435e-38;
 const float FLT_MAX = 3.40282347e38;
 
@@ -315,8 +320,8 @@ void trace_world(uint index) {
 void main() {
     // The careful pass traces the rays the fast pass listed.
     bool from_list = PASS == PASS_CAREFUL;
-    uint id = from_list ? careful_slot() : gl_GlobalInvocationID.x;
-    uint count = from_list ? careful[CAREFUL_COUNT] : params.ray_count;
+    uint id = from_list ? careful_slot() : batch_slot(TRACE_WORKGROUP_SIZE);
+    uint count = from_list ? careful[CAREFUL_COUNT] : batch_count();
     if (id >= count) return;
     trace_world(from_list ? careful[CAREFUL_HEADER_WORDS + id] : id);
 }

@@ -100,8 +100,9 @@ gpu_struct! {
         pub mask: u32,
         /// Nodes of the top level (0: no instance, every ray misses).
         pub top_nodes: u32,
-        /// Padding (0).
-        pub pad: u32,
+        /// 1: a device-counted trace (`TwoLevelTracer::record_binding_indirect`):
+        /// the count and the dispatch come from the binding's arguments.
+        pub indirect: u32,
     }
 }
 

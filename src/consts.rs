@@ -141,8 +141,11 @@ pub const TL_BINDING_TOP: u32 = 6;
 pub const TL_BINDING_ORDER: u32 = 7;
 /// Binding of the careful pass's list (as `BINDING_CAREFUL`; one-instance robust traces).
 pub const TL_BINDING_CAREFUL: u32 = 8;
+/// Binding of a device-counted trace's arguments (as `BINDING_INDIRECT`; a
+/// dummy unless `TwoLevelParams::indirect`).
+pub const TL_BINDING_INDIRECT: u32 = 9;
 /// Number of bindings of the two-level kernel.
-pub const TL_BINDINGS: u32 = 9;
+pub const TL_BINDINGS: u32 = 10;
 /// Specialization constant id of the two-level kernel's one-instance mode (after the trace kernel's).
 pub const TL_SPEC_ONE_INSTANCE: u32 = TRACE_SPECS;
 /// Entries of the two-level kernel's top-level stack: the BVH's depth must stay below it.
@@ -321,6 +324,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("TL_BINDING_TOP", TL_BINDING_TOP),
     ("TL_BINDING_ORDER", TL_BINDING_ORDER),
     ("TL_BINDING_CAREFUL", TL_BINDING_CAREFUL),
+    ("TL_BINDING_INDIRECT", TL_BINDING_INDIRECT),
     ("MAX_TOP_STACK", MAX_TOP_STACK),
     ("TL_SPEC_ONE_INSTANCE", TL_SPEC_ONE_INSTANCE),
     ("ORDER_CELL_BITS", ORDER_CELL_BITS),

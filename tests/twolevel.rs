@@ -398,6 +398,119 @@ fn two_level_traces_record_into_an_engine_frame() {
     common::assert_validation_clean(&ctx);
 }
 
+/// Device-counted traces (`bind_indirect`, `record_binding_indirect`): the
+/// count read on the device from the caller's buffer (a third, all, more than
+/// the binding holds, none), the hits of the counted rays bit for bit those of
+/// `trace`, the rays past the count untouched; robust and plain, closest and
+/// any hit, on many instances and on one (its own pipeline); the misuse refused.
+#[test]
+fn two_level_device_counted_traces_equal_host_counted_ones() {
+    use kdtrace::ash::vk;
+    use kdtrace::gpu::{Buffer, BufferRange};
+    use kdtrace::gpu_allocator::MemoryLocation;
+    let ctx = common::context();
+    let config = BuildConfig::default();
+    let geometries = vec![BottomLevel::new(5, common::sphere(2, 0.2, 9), &config)];
+    let instances = |n: usize| -> Vec<Instance> {
+        (0..n)
+            .map(|i| Instance {
+                geometry: 0,
+                transform: Affine3A::from_scale_rotation_translation(
+                    Vec3::new(1.0, 0.5 + 0.25 * i as f32, 1.0),
+                    Quat::from_rotation_y(0.7 * i as f32),
+                    Vec3::new(2.5 * (i % 3) as f32, 2.5 * (i / 3) as f32, 0.0),
+                ),
+                instance_id: 100 + i as u32,
+                mask: 0xff,
+            })
+            .collect()
+    };
+    let mut scene = TwoLevelScene::new(geometries, &instances(6)).unwrap();
+    let mut tracer = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    let rays = common::random_rays(&mut common::Rng(21), Vec3::new(-1.0, -1.0, -1.0), Vec3::new(6.0, 4.0, 1.0), 700);
+    let n = rays.len() as u32;
+    let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
+    let mut ray_buf = Buffer::new(&ctx, u64::from(n) * 32, storage, MemoryLocation::CpuToGpu, "rays").unwrap();
+    ray_buf.write(0, bytemuck::cast_slice(&rays)).unwrap();
+    let mut hit_buf = Buffer::new(&ctx, u64::from(n) * 32, storage, MemoryLocation::CpuToGpu, "hits").unwrap();
+    // The counts as a pass on the device would leave them, at an offset.
+    let counts_words = [7, 7, 7, 7, n / 3, n, n + 1000, 0];
+    let mut counts = Buffer::new(&ctx, 64, storage, MemoryLocation::CpuToGpu, "counts").unwrap();
+    counts.write(0, bytemuck::cast_slice(&counts_words)).unwrap();
+    let counts_range = BufferRange::new(counts.buffer, 16, 16);
+    let unset = [0xdead_u32; 8];
+    let traversals = [
+        Traversal::closest(Variant::Stack),
+        Traversal { any_hit: true, ..Traversal::closest(Variant::ShortStack) },
+        Traversal { robust: false, ..Traversal::closest(Variant::Stack) },
+    ];
+    for placed in [6, 1] {
+        scene.set_instances(&instances(placed)).unwrap();
+        tracer.set_instances(&scene).unwrap();
+        for traversal in traversals {
+            let expected = tracer.trace(&rays, 0xff, traversal).unwrap();
+            let hit_count = expected.iter().filter(|h| h.is_hit()).count();
+            assert!(hit_count > 20 * placed.min(3), "{placed} instances: too few hits");
+            // SAFETY: the buffers are live storage buffers of this device and
+            // outlive every waited submission below, as does the binding.
+            let binding = unsafe {
+                tracer.bind_indirect(
+                    BufferRange::whole(&ray_buf),
+                    BufferRange::whole(&hit_buf),
+                    counts_range,
+                    traversal,
+                )
+            }
+            .unwrap();
+            for word in 0..4 {
+                let count = counts_words[word as usize + 4].min(n) as usize;
+                hit_buf.write(0, bytemuck::cast_slice(&vec![unset; n as usize])).unwrap();
+                let mut recorded = Ok(());
+                ctx.submit_and_wait(|cmd| {
+                    // SAFETY: `cmd` is recording; binding, buffers and tracer outlive the wait.
+                    recorded = unsafe { tracer.record_binding_indirect(cmd, &binding, word, 0xff) };
+                    host_read_barrier(&ctx, cmd);
+                })
+                .unwrap();
+                recorded.unwrap();
+                let words: &[[u32; 8]] = bytemuck::cast_slice(hit_buf.read(0, n as usize * 32).unwrap());
+                let hits: Vec<InstanceHit> =
+                    words[..count].iter().map(|w| InstanceHit::from(bytemuck::cast_ref(w))).collect();
+                let what = format!("{placed} instances, {traversal:?}, count word {word}");
+                assert_eq!(hits, expected[..count], "{what}");
+                assert!(words[count..].iter().all(|w| *w == unset), "{what}: rays past the count {count}");
+            }
+            let refused =
+                |tracer: &TwoLevelTracer, binding: &kdtrace::twolevel::TwoLevelBinding, word: u32| -> String {
+                    let mut recorded = Ok(());
+                    ctx.submit_and_wait(|cmd| {
+                        // SAFETY: nothing is recorded when it fails.
+                        recorded = unsafe { tracer.record_binding_indirect(cmd, binding, word, 0xff) };
+                    })
+                    .unwrap();
+                    recorded.unwrap_err().to_string()
+                };
+            assert!(refused(&tracer, &binding, 4).contains("past"));
+            // SAFETY: as above.
+            let host_counted =
+                unsafe { tracer.bind(BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf), traversal) }.unwrap();
+            assert!(refused(&tracer, &host_counted, 0).contains("bind_indirect"));
+            // SAFETY: as above; a count range of 2 bytes is refused.
+            let bad = unsafe {
+                tracer.bind_indirect(
+                    BufferRange::whole(&ray_buf),
+                    BufferRange::whole(&hit_buf),
+                    BufferRange::new(counts.buffer, 16, 2),
+                    traversal,
+                )
+            };
+            assert!(bad.err().map(|e| e.to_string()).unwrap_or_default().contains("whole u32"));
+        }
+    }
+    drop((tracer, ray_buf, hit_buf, counts));
+    common::assert_validation_clean(&ctx);
+}
+
 /// Edge cases, GPU against the CPU twin bit for bit: no instance, an instance of
 /// a geometry without triangles (alone: the one-instance pipeline; and beside
 /// another), a zero mask, a ray whose segment ends before the scene.

@@ -1,11 +1,11 @@
 // Which ray of a batch an invocation traces, and how many rays the batch holds:
 // `ray_count` rays dispatched in one row of workgroups, or, for a device-counted
-// trace (TraceParams.indirect, Tracer::record_binding_indirect), the count that
+// trace (`indirect` of TraceParams or TwoLevelParams, record_binding_indirect), the count that
 // glsl/indirect_args.comp wrote into the binding's arguments, dispatched
 // indirectly in rows of CAREFUL_MAX_GROUPS workgroups. Used by trace.comp,
-// trace_ray_query.comp and order_rays.comp.
+// trace_twolevel.comp, trace_ray_query.comp and order_rays.comp.
 //
-// Expects from its includer: `params` (TraceParams) and `indirect_words[]`.
+// Expects from its includer: `params` (with `ray_count` and `indirect`) and `indirect_words[]`.
 #ifndef SHARED_BATCH_GLSL
 #define SHARED_BATCH_GLSL
 

@@ -15,7 +15,7 @@ use crate::consts::{
     RQ_BINDING_SCENE, TRACE_BINDINGS,
 };
 use crate::error::{Error, Result};
-use crate::gpu::{check_range, Binding, Buffer, BufferRange, BufferSet, Kernel};
+use crate::gpu::{check_range, shaders, Binding, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc};
 
 use super::options::{COUNTER_BYTES, HIT_BYTES, RAY_BYTES, WORD_BYTES};
 use super::{Backend, RayOrder, TraceKernels, TraceOptions, TraceParams, Tracer, TracerScene};
@@ -130,14 +130,101 @@ pub(crate) unsafe fn record_fast_then_careful(
     unsafe { careful.record_dispatch_indirect(cmd, set, push, list.buffer, 0) };
 }
 
-/// The arguments of a device-counted binding ([`Tracer::bind_indirect`]).
-pub(super) struct IndirectArgs {
+/// The arguments of a device-counted binding ([`Tracer::bind_indirect`],
+/// `TwoLevelTracer::bind_indirect`).
+pub(crate) struct IndirectArgs {
     pub(super) kernel: Arc<Kernel>,
     pub(super) set: BufferSet,
     /// `INDIRECT_WORDS` words: the trace dispatch, the count, the ordering dispatch.
-    pub(super) args: Buffer,
+    pub(crate) args: Buffer,
     /// The caller's counts.
     pub(super) source: BufferRange,
+}
+
+/// The kernel that turns a caller's count into a binding's arguments
+/// (glsl/indirect_args.comp).
+pub(crate) fn compile_args_kernel(ctx: &Arc<GpuContext>) -> Result<Kernel> {
+    Kernel::new(
+        ctx,
+        &KernelDesc {
+            name: "indirect_args",
+            spirv: shaders::INDIRECT_ARGS,
+            bindings: ARGS_BINDINGS,
+            push_constant_size: 8,
+            spec_constants: &[],
+            workgroup_size: 1,
+            required_subgroup_size: None,
+            texel_buffers: &[],
+            acceleration_structures: &[],
+            required_subgroup_operations: vk::SubgroupFeatureFlags::empty(),
+        },
+    )
+}
+
+impl IndirectArgs {
+    /// The arguments buffer and its descriptor set for the count range `source`.
+    ///
+    /// Errors: `Error::InvalidInput` when `source` holds no whole `u32` at a
+    /// multiple of 4 bytes or lies outside its buffer.
+    ///
+    /// # Safety
+    /// `source` is a range of a live storage buffer of `ctx`'s device that
+    /// outlives the arguments' use.
+    pub(crate) unsafe fn new(ctx: &Arc<GpuContext>, kernel: Arc<Kernel>, source: BufferRange) -> Result<IndirectArgs> {
+        check_range(ctx, "counts", &source)?;
+        if source.range < WORD_BYTES || source.offset % WORD_BYTES != 0 {
+            return Err(Error::InvalidInput(format!(
+                "the counts range ({} bytes at offset {}) must hold a whole u32 at a multiple of 4 bytes",
+                source.range, source.offset
+            )));
+        }
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::INDIRECT_BUFFER;
+        let bytes = u64::from(INDIRECT_WORDS) * WORD_BYTES;
+        let args = Buffer::new(ctx, bytes, usage, MemoryLocation::GpuOnly, "indirect trace arguments")?;
+        let mut ranges = [source; ARGS_BINDINGS as usize];
+        ranges[ARGS_BINDING_SOURCE as usize] = source;
+        ranges[ARGS_BINDING_ARGS as usize] = BufferRange::whole(&args);
+        // SAFETY: the arguments buffer is ours; the caller vouches for `source`.
+        let set = unsafe { BufferSet::from_ranges(ctx, &kernel, &ranges)? };
+        Ok(IndirectArgs { kernel, set, args, source })
+    }
+
+    /// `Error::InvalidInput` when word `word` lies past the count range.
+    pub(crate) fn check_word(&self, word: u32) -> Result<()> {
+        if (u64::from(word) + 1) * WORD_BYTES > self.source.range {
+            return Err(Error::InvalidInput(format!(
+                "count word {word} lies past the binding's count range of {} bytes",
+                self.source.range
+            )));
+        }
+        Ok(())
+    }
+
+    /// Records the one-invocation dispatch that turns the count at word `word`
+    /// into the arguments (clamped to `capacity`), with a buffer barrier on them
+    /// before (an earlier recording's dispatches have read them) and after (for
+    /// the indirect dispatches and the kernels' reads of the count).
+    ///
+    /// # Safety
+    /// `cmd` is recording, outside a render pass, on a compute queue of
+    /// `device`; these arguments and their source live until it completes.
+    pub(crate) unsafe fn record(&self, device: &ash::Device, cmd: vk::CommandBuffer, word: u32, capacity: u32) {
+        let (compute, indirect) = (
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
+        );
+        let write = vk::AccessFlags::SHADER_WRITE;
+        let read = vk::AccessFlags::INDIRECT_COMMAND_READ | vk::AccessFlags::SHADER_READ;
+        let args = [buffer_barrier(BufferRange::whole(&self.args), write, write)];
+        let push: [u32; 2] = [word, capacity];
+        // SAFETY: the caller's contract.
+        unsafe {
+            device.cmd_pipeline_barrier(cmd, indirect, compute, vk::DependencyFlags::empty(), &[], &args, &[]);
+            self.kernel.record_dispatch(cmd, self.set.set, bytemuck::bytes_of(&push), 1);
+            let args = [buffer_barrier(BufferRange::whole(&self.args), write, read)];
+            device.cmd_pipeline_barrier(cmd, compute, indirect, vk::DependencyFlags::empty(), &[], &args, &[]);
+        }
+    }
 }
 
 /// How many rays a recording traces: a count known when recording, or the
@@ -318,23 +405,9 @@ impl Tracer {
         let indirect = match counts {
             None => None,
             Some(source) => {
-                check_range(&self.ctx, "counts", &source)?;
-                if source.range < WORD_BYTES || source.offset % WORD_BYTES != 0 {
-                    return Err(Error::InvalidInput(format!(
-                        "the counts range ({} bytes at offset {}) must hold a whole u32 at a multiple of 4 bytes",
-                        source.range, source.offset
-                    )));
-                }
                 let kernel = self.pipelines.args_kernel()?;
-                let usage = vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::INDIRECT_BUFFER;
-                let bytes = u64::from(INDIRECT_WORDS) * WORD_BYTES;
-                let args = Buffer::new(&self.ctx, bytes, usage, MemoryLocation::GpuOnly, "indirect trace arguments")?;
-                let mut ranges = [source; ARGS_BINDINGS as usize];
-                ranges[ARGS_BINDING_SOURCE as usize] = source;
-                ranges[ARGS_BINDING_ARGS as usize] = BufferRange::whole(&args);
-                // SAFETY: the arguments buffer is this tracer's; the caller vouches for `source`.
-                let set = unsafe { BufferSet::from_ranges(&self.ctx, &kernel, &ranges)? };
-                Some(IndirectArgs { kernel, set, args, source })
+                // SAFETY: the caller vouches for `source`.
+                Some(unsafe { IndirectArgs::new(&self.ctx, kernel, source)? })
             }
         };
         let indirect_range = match &indirect {
@@ -507,7 +580,6 @@ impl Tracer {
             };
         };
         let (compute, transfer) = (vk::PipelineStageFlags::COMPUTE_SHADER, vk::PipelineStageFlags::TRANSFER);
-        let indirect_stage = compute | vk::PipelineStageFlags::DRAW_INDIRECT;
         let (write, read_write) =
             (vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
         // A dispatch over the batch: direct over `ray_count` invocations, or
@@ -523,14 +595,8 @@ impl Tracer {
         // SAFETY: forwarded from the caller; the list buffers live in the binding.
         unsafe {
             if let Some((i, word)) = indirect {
-                // The arguments from the caller's count, once an earlier
-                // recording's dispatches have read them.
-                let args = BufferRange::whole(&i.args);
-                let read = vk::AccessFlags::INDIRECT_COMMAND_READ | vk::AccessFlags::SHADER_READ;
-                barrier(indirect_stage, compute, &[buffer_barrier(args, write, write)]);
-                let args_push: [u32; 2] = [word, binding.capacity];
-                i.kernel.record_dispatch(cmd, i.set.set, bytemuck::bytes_of(&args_push), 1);
-                barrier(compute, indirect_stage, &[buffer_barrier(args, write, read)]);
+                // The arguments from the caller's count.
+                i.record(device, cmd, word, binding.capacity);
             }
             if let Some(order) = &binding.order {
                 // The coherent order: count the buckets, scan them, place the rays.
@@ -605,12 +671,7 @@ impl Tracer {
                 "record_binding_indirect needs a binding made by Tracer::bind_indirect".into(),
             ));
         };
-        if (u64::from(word) + 1) * WORD_BYTES > i.source.range {
-            return Err(Error::InvalidInput(format!(
-                "count word {word} lies past the binding's count range of {} bytes",
-                i.source.range
-            )));
-        }
+        i.check_word(word)?;
         // SAFETY: checked above; the caller vouches for `cmd` and lifetimes.
         unsafe { self.record_unchecked(cmd, kernel, binding, BatchCount::Device { word }) };
         Ok(())

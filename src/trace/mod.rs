@@ -142,7 +142,7 @@ mod pipelines;
 pub(crate) mod scene;
 
 pub use binding::TraceBinding;
-pub(crate) use binding::{buffer_barrier, record_fast_then_careful};
+pub(crate) use binding::{buffer_barrier, compile_args_kernel, record_fast_then_careful, IndirectArgs};
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES, WORD_BYTES};
 pub(crate) use pipelines::compile_passes;

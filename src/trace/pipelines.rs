@@ -5,10 +5,10 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::consts::{
-    ARGS_BINDINGS, BINDING_NODES, BINDING_TRIANGLES, ORDER_BINDINGS, ORDER_STEP_COUNT, ORDER_STEP_SCAN,
-    ORDER_STEP_SCATTER, ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, TRACE_BINDINGS, TRACE_SPECS,
-    TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST,
-    TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    BINDING_NODES, BINDING_TRIANGLES, ORDER_BINDINGS, ORDER_STEP_COUNT, ORDER_STEP_SCAN, ORDER_STEP_SCATTER,
+    ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
+    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
+    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::gpu::{in_order, shaders, GpuContext, Kernel, KernelDesc};
@@ -59,21 +59,7 @@ impl TracePipelines {
         if let Some(k) = &self.args {
             return Ok(k.clone());
         }
-        let kernel = Arc::new(Kernel::new(
-            &self.ctx,
-            &KernelDesc {
-                name: "indirect_args",
-                spirv: shaders::INDIRECT_ARGS,
-                bindings: ARGS_BINDINGS,
-                push_constant_size: 8,
-                spec_constants: &[],
-                workgroup_size: 1,
-                required_subgroup_size: None,
-                texel_buffers: &[],
-                acceleration_structures: &[],
-                required_subgroup_operations: vk::SubgroupFeatureFlags::empty(),
-            },
-        )?);
+        let kernel = Arc::new(super::binding::compile_args_kernel(&self.ctx)?);
         self.args = Some(kernel.clone());
         Ok(kernel)
     }

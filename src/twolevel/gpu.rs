@@ -13,15 +13,16 @@ use gpu_allocator::MemoryLocation;
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    CAREFUL_HEADER_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES, TL_BINDING_HITS,
-    TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP, TL_BINDING_TRIANGLES,
-    TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH,
-    TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES,
+    TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
+    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
+    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::trace::{buffer_barrier, record_fast_then_careful};
+use crate::trace::{buffer_barrier, compile_args_kernel, record_fast_then_careful, IndirectArgs};
 use crate::traversal::{Traversal, Variant};
 
 /// A [`TwoLevelScene`] on a device. Geometries are uploaded once;
@@ -37,6 +38,9 @@ use crate::traversal::{Traversal, Variant};
 /// is one dispatch; a robust trace records two, as `Tracer` does (a fast pass,
 /// and an indirect careful pass over the rays it listed), with kdtrace's own
 /// buffer barriers on the binding's list and your hit range between them.
+/// Rays counted on the device (e.g. appended by your shading pass) are traced
+/// with [`TwoLevelTracer::bind_indirect`] and
+/// [`TwoLevelTracer::record_binding_indirect`], with no readback.
 pub struct TwoLevelTracer {
     ctx: Arc<GpuContext>,
     nodes: Buffer,
@@ -60,6 +64,10 @@ pub struct TwoLevelTracer {
     /// Buffers a recorded update replaced or staged through, each under the
     /// frame value that may still use them ([`TwoLevelTracer::release_retired`]).
     retired: Vec<(u64, Buffer)>,
+    /// The kernel of device-counted traces' arguments, compiled on first use.
+    args_kernel: Option<Arc<Kernel>>,
+    /// Bound at `TL_BINDING_INDIRECT` by host-counted bindings (never read).
+    dummy: Buffer,
 }
 
 /// The pipelines of one traversal: one pass, or for robust traces a fast pass
@@ -89,6 +97,8 @@ pub struct TwoLevelBinding {
     generation: u64,
     /// Rays the bound ranges hold.
     capacity: u32,
+    /// A device-counted binding's arguments ([`TwoLevelTracer::bind_indirect`]).
+    indirect: Option<IndirectArgs>,
 }
 
 const TEXEL: vk::BufferUsageFlags = vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
@@ -153,6 +163,14 @@ impl TwoLevelTracer {
             kernels: Vec::new(),
             one_instance: false,
             retired: Vec::new(),
+            args_kernel: None,
+            dummy: Buffer::new(
+                ctx,
+                u64::from(INDIRECT_WORDS) * 4,
+                STORAGE,
+                MemoryLocation::GpuOnly,
+                "two-level unused arguments",
+            )?,
         };
         tracer.set_instances(scene)?;
         Ok(tracer)
@@ -458,6 +476,43 @@ impl TwoLevelTracer {
         hits: BufferRange,
         traversal: Traversal,
     ) -> Result<TwoLevelBinding> {
+        // SAFETY: forwarded from the caller.
+        unsafe { self.bind_inner(rays, hits, None, traversal) }
+    }
+
+    /// [`TwoLevelTracer::bind`] for device-counted traces: the binding can also
+    /// be recorded with [`TwoLevelTracer::record_binding_indirect`], which traces
+    /// as many rays as a `u32` of `counts` says when the trace runs (written by
+    /// an earlier pass of yours on the device), with no readback, as
+    /// [`crate::trace::Tracer::bind_indirect`] does for one level. It adds a
+    /// 32-byte arguments buffer and the descriptor set of the small kernel that
+    /// fills it.
+    ///
+    /// Errors: those of [`TwoLevelTracer::bind`]; `counts` must hold a whole
+    /// `u32` at a multiple of 4 bytes.
+    ///
+    /// # Safety
+    /// As [`TwoLevelTracer::bind`], and `counts` (a range of a storage buffer of
+    /// this device) stays alive while the binding is used.
+    pub unsafe fn bind_indirect(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        counts: BufferRange,
+        traversal: Traversal,
+    ) -> Result<TwoLevelBinding> {
+        // SAFETY: forwarded from the caller.
+        unsafe { self.bind_inner(rays, hits, Some(counts), traversal) }
+    }
+
+    /// `bind`, and `bind_indirect` with `counts`.
+    unsafe fn bind_inner(
+        &mut self,
+        rays: BufferRange,
+        hits: BufferRange,
+        counts: Option<BufferRange>,
+        traversal: Traversal,
+    ) -> Result<TwoLevelBinding> {
         if rays.overlaps(&hits) {
             return Err(Error::InvalidInput("the ray and hit ranges overlap".into()));
         }
@@ -481,9 +536,24 @@ impl TwoLevelTracer {
             ranges[binding as usize] = BufferRange::whole(buffer);
         }
         ranges[TL_BINDING_HITS as usize] = hits;
+        let indirect = match counts {
+            None => None,
+            Some(source) => {
+                let args_kernel = match &self.args_kernel {
+                    Some(k) => k.clone(),
+                    None => self.args_kernel.insert(Arc::new(compile_args_kernel(&self.ctx)?)).clone(),
+                };
+                // SAFETY: the caller vouches for `source`.
+                Some(unsafe { IndirectArgs::new(&self.ctx, args_kernel, source)? })
+            }
+        };
+        ranges[TL_BINDING_INDIRECT as usize] = BufferRange::whole(match &indirect {
+            Some(i) => &i.args,
+            None => &self.dummy,
+        });
         // SAFETY: the scene buffers and the list are this tracer's; the caller vouches for the rest.
         let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1.main, &ranges)? };
-        Ok(TwoLevelBinding { set, list, hits, kernel, generation: self.generation, capacity })
+        Ok(TwoLevelBinding { set, list, hits, kernel, generation: self.generation, capacity, indirect })
     }
 
     /// Records into `cmd` the two-level trace of the first `count` rays of
@@ -505,6 +575,60 @@ impl TwoLevelTracer {
         count: u32,
         mask: u8,
     ) -> Result<()> {
+        // SAFETY: forwarded from the caller.
+        unsafe { self.record_inner(cmd, binding, count, None, mask) }
+    }
+
+    /// Records into `cmd` the two-level trace of as many rays of `binding`'s
+    /// ray range as the `u32` at word `word` of its count range says when the
+    /// trace runs (at most the ranges' capacity: rays past it are not traced),
+    /// visible to `mask`; the binding comes from
+    /// [`TwoLevelTracer::bind_indirect`]. Nothing is read back: first a
+    /// one-invocation kernel turns the count into the binding's arguments (with
+    /// a buffer barrier on them before and after), then the passes of
+    /// [`TwoLevelTracer::record_binding`] are dispatched indirectly. Never
+    /// submits or waits.
+    ///
+    /// Barriers are yours as for [`TwoLevelTracer::record_binding`], and the
+    /// count is one more input: make your write of it available to
+    /// `COMPUTE_SHADER` with `SHADER_READ` before this recording, and do not
+    /// write it again before an execution dependency after `COMPUTE_SHADER`.
+    ///
+    /// Errors (nothing is recorded then): those of
+    /// [`TwoLevelTracer::record_binding`]; `Error::InvalidInput` when `binding`
+    /// was not made by [`TwoLevelTracer::bind_indirect`] or `word` lies past
+    /// its count range.
+    ///
+    /// # Safety
+    /// As [`TwoLevelTracer::record_binding`]; the count range's buffer too must
+    /// stay alive until `cmd` has completed.
+    pub unsafe fn record_binding_indirect(
+        &self,
+        cmd: vk::CommandBuffer,
+        binding: &TwoLevelBinding,
+        word: u32,
+        mask: u8,
+    ) -> Result<()> {
+        let Some(i) = &binding.indirect else {
+            return Err(Error::InvalidInput(
+                "record_binding_indirect needs a binding made by TwoLevelTracer::bind_indirect".into(),
+            ));
+        };
+        i.check_word(word)?;
+        // SAFETY: forwarded from the caller.
+        unsafe { self.record_inner(cmd, binding, binding.capacity, Some(word), mask) }
+    }
+
+    /// `record_binding` over `count` rays, or with `word` the device-counted
+    /// trace of at most `count` (the capacity) rays.
+    unsafe fn record_inner(
+        &self,
+        cmd: vk::CommandBuffer,
+        binding: &TwoLevelBinding,
+        count: u32,
+        word: Option<u32>,
+        mask: u8,
+    ) -> Result<()> {
         if binding.generation != self.generation {
             return Err(Error::InvalidInput(
                 "the binding was made before set_instances reallocated the instance buffers: bind again".into(),
@@ -513,29 +637,41 @@ impl TwoLevelTracer {
         if count > binding.capacity {
             return Err(Error::InvalidInput(format!("{count} rays; the bound ranges hold {}", binding.capacity)));
         }
+        let indirect = word.and_then(|w| binding.indirect.as_ref().map(|i| (i, w)));
         if count > 0 {
-            let params =
-                TwoLevelParams { ray_count: count, mask: u32::from(mask), top_nodes: self.top_node_count, pad: 0 };
+            let params = TwoLevelParams {
+                ray_count: count,
+                mask: u32::from(mask),
+                top_nodes: self.top_node_count,
+                indirect: indirect.is_some() as u32,
+            };
             let push = bytemuck::bytes_of(&params);
             let passes = match &self.kernels[binding.kernel] {
                 (_, _, Some(one)) if self.one_instance => one,
                 (_, general, _) => general,
             };
+            let fast_args = indirect.map(|(i, _)| (i.args.buffer, 0));
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
             unsafe {
-                match &passes.careful {
-                    Some(careful) => record_fast_then_careful(
+                if let Some((i, word)) = indirect {
+                    i.record(&self.ctx.device, cmd, word, binding.capacity);
+                }
+                match (&passes.careful, fast_args) {
+                    (Some(careful), _) => record_fast_then_careful(
                         &self.ctx.device,
                         cmd,
                         binding.set.set,
                         push,
                         count,
-                        None,
+                        fast_args,
                         [&passes.main, careful],
                         &binding.list,
                         &[binding.hits],
                     ),
-                    None => passes.main.record_dispatch(cmd, binding.set.set, push, count),
+                    (None, Some((args, offset))) => {
+                        passes.main.record_dispatch_indirect(cmd, binding.set.set, push, args, offset)
+                    }
+                    (None, None) => passes.main.record_dispatch(cmd, binding.set.set, push, count),
                 }
             }
         }
