@@ -294,6 +294,86 @@ fn stress_scaled_scenes() {
 /// for bit: these rays need the f64 pass of a leaf (unsure pairs, depth ties) far
 /// more often than camera and random rays (tests/gpu_trace.rs), and robust single
 /// rays take it in a second, careful trace on the GPU but in one trace on the CPU.
+/// The exposed faces of random unit voxels (8³ cells, a third filled): many
+/// axis-aligned quads in the planes the builder splits at.
+fn voxel_faces(seed: u64) -> Vec<[Vec3; 3]> {
+    const N: i32 = 8;
+    let mut rng = SplitMix64(seed);
+    let filled: Vec<bool> = (0..N * N * N).map(|_| rng.next_f32() < 0.3).collect();
+    let at = |p: [i32; 3]| p.iter().all(|&c| (0..N).contains(&c)) && filled[((p[0] * N + p[1]) * N + p[2]) as usize];
+    let mut tris = Vec::new();
+    for cell in 0..N * N * N {
+        let p = [cell / (N * N), cell / N % N, cell % N];
+        if !at(p) {
+            continue;
+        }
+        for axis in 0..3 {
+            for side in [0, 1] {
+                let mut q = p;
+                q[axis] += if side == 1 { 1 } else { -1 };
+                if at(q) {
+                    continue;
+                }
+                let mut c = Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32);
+                c[axis] += side as f32;
+                let (u, w) = (Vec3::AXES[(axis + 1) % 3], Vec3::AXES[(axis + 2) % 3]);
+                let quad = [c, c + u, c + u + w, c + w];
+                let [a, b, d, e] = if side == 1 { quad } else { [quad[0], quad[3], quad[2], quad[1]] };
+                tris.push([a, b, d]);
+                tris.push([a, d, e]);
+            }
+        }
+    }
+    tris
+}
+
+/// Segments that end exactly on a face lying in a split plane (`tmax` = 1 at a
+/// face's centre, from near and from 1e5-1e6 away, where the segment frame is
+/// shifted): the plane's rounded `t` may pass the segment's end, and the entry
+/// beyond it, clamped to start there, must still be visited while there is no
+/// hit (`starts_behind` in leaf.glsl: `stack` once ended such rays at that
+/// entry, a miss). Every ray must agree with the exact reference, robust `stack`
+/// on the GPU (closest and any hit) and its CPU twin.
+#[test]
+fn segments_ending_on_split_planes_keep_their_hit() {
+    let ctx = context();
+    let triangles = voxel_faces(17);
+    let tree = KdTree::build(&triangles, &BuildConfig::default());
+    let links = TreeLinks::new(&tree.nodes, tree.bounds);
+    let mut rng = SplitMix64(3);
+    let mut rays = Vec::new();
+    for (i, t) in triangles.iter().enumerate().step_by(2) {
+        // The quad's centre (its diagonal's midpoint), exact in f32.
+        let end = (t[0] + t[2]) * 0.5;
+        let far = i % 4 == 0;
+        // Offsets in steps of 1/8, so that origin + 1 * dir == end exactly.
+        let reach = if far { 1.0e6 } else { 16.0 };
+        let offset = (rng.unit_vector() * reach * 8.0).round() / 8.0;
+        if offset.length() < 1.0 {
+            continue;
+        }
+        rays.push(Ray::new(end - offset, offset, 0.0, 1.0));
+    }
+    let exacts = exact_answers(&triangles, &rays);
+    let mut tracer = Tracer::new(&ctx, &tree, &triangles).unwrap();
+    let stack = Traversal::closest(Variant::Stack);
+    for (label, hits, any_hit) in [
+        ("GPU", tracer.trace(&rays, &TraceOptions::new(stack)).unwrap().hits, false),
+        ("CPU twin", cpu_hits(&tree, &triangles, &links, &rays, stack), false),
+        (
+            "GPU any-hit",
+            tracer.trace(&rays, &TraceOptions::new(Traversal { any_hit: true, ..stack })).unwrap().hits,
+            true,
+        ),
+    ] {
+        let t = judge_with(&triangles, &rays, &hits, &exacts, any_hit);
+        println!("{}\n{}", table_header(), table_row(label, &t));
+        assert_eq!((t.agreeing(), t.serious()), (rays.len(), 0), "{label}: {} rays", rays.len());
+    }
+    drop(tracer);
+    assert_validation_clean(&ctx);
+}
+
 #[test]
 fn stress_rays_gpu_equals_cpu_twin() {
     let mut failures = Vec::new();

@@ -82,6 +82,17 @@ float best_reach(Closest best) {
     return ROBUST ? best.hit.t + best.err : best.hit.t;
 }
 
+// True when a stack entry or a leaf that starts at `t0` cannot hold the closest
+// hit: t0 lies at or behind its reach (NaN too). With ROBUST only once there is
+// a hit: without one the reach is the segment's end, where a split plane
+// through a hit exactly at tmax may round to, and the entry beyond it is clamped
+// to start there (decide_children) and still holds that hit. (Without ROBUST as
+// before: its instructions and hits unchanged.) CPU twin: State::starts_behind.
+bool starts_behind(float t0, Closest best) {
+    bool has_hit = !ROBUST || best.hit.prim_id != PRIM_MISS;
+    return has_hit && !(t0 < best_reach(best));
+}
+
 // Tests the leaf's triangles, keeping the closest hit in `best` (t <= best.hit.t);
 // any-hit mode stops at the first hit. Returns false when the driver cut a loop
 // short (see trace.comp).

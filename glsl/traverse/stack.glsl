@@ -3,7 +3,8 @@
 // Beyond pbrt and the paper, and unlike the other variants, it neither pushes nor
 // fetches a child that its parent flags as an empty leaf (NODE_BELOW_EMPTY,
 // NODE_ABOVE_EMPTY), and it skips every entry and leaf that starts behind the
-// closest hit's reach (not only after the leaf of the hit).
+// closest hit's reach (not only after the leaf of the hit; robust: once there
+// is a hit, see starts_behind in leaf.glsl).
 //
 // Entries lie front to back on the stack (each one's t0 at or before those below
 // it), so the first entry or leaf found behind the reach ends the ray - except
@@ -97,7 +98,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
                 if (sp == 0u) return true;
                 --sp;
                 t0 = stack_t0[sp];
-                dropped = !(t0 < best_reach(best));
+                dropped = starts_behind(t0, best);
                 if (dropped && (LIST_PLANE_RAYS || !in_plane)) return true;
                 node = stack_node[sp];
                 t1 = stack_t1[sp];
@@ -110,7 +111,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
         // A leaf starts behind the closest hit's reach only below a near child
         // skipped as empty: nothing closer there or in any entry, unless one of
         // a split plane the ray lies in is left (then only this leaf is skipped).
-        bool behind = !(t0 < best_reach(best));
+        bool behind = starts_behind(t0, best);
         if (behind && (LIST_PLANE_RAYS || !in_plane)) return true;
         uint leaf = (!LIST_PLANE_RAYS && behind) ? LEAF_GO_ON : visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
@@ -121,7 +122,7 @@ bool trace_stack(TraceRay r, float t0, float t1, inout Closest best, inout Trace
         if (sp == 0u) return true;
         --sp;
         t0 = stack_t0[sp];
-        dropped = !(t0 < best_reach(best));
+        dropped = starts_behind(t0, best);
         if (dropped && (LIST_PLANE_RAYS || !in_plane)) return true;
         node = stack_node[sp];
         t1 = stack_t1[sp];

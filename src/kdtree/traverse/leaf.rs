@@ -61,6 +61,15 @@ impl State<'_, '_> {
         self.best.reach()
     }
 
+    /// `starts_behind` in leaf.glsl: a stack entry or leaf starting at `t0`
+    /// cannot hold the closest hit (`t0` at or behind its reach). Robust: only
+    /// once there is a hit (without one the reach is the segment's end, and an
+    /// entry clamped to start there may hold a hit exactly at `tmax`).
+    pub(super) fn starts_behind(&self, t0: f32) -> bool {
+        let has_hit = !self.r.wr.robust || self.best.hit.prim_id != PRIM_MISS;
+        has_hit && !starts_before(t0, self.reach())
+    }
+
     /// Tests a leaf (`visit_leaf` in leaf.glsl); true when traversal is done
     /// (`leaf_done`): an any-hit found one, or the closest hit lies inside the
     /// leaf's segment (which ends at `t1`).

@@ -2,13 +2,13 @@
 //! `glsl/traverse/stack.glsl`.
 
 use super::decide::{decide_children, ExitPlane, Visit};
-use super::leaf::starts_before;
 use super::State;
 use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS};
 
 /// Twin of `trace_stack` in glsl/traverse/stack.glsl: children that the parent's
 /// flags mark as empty leaves are neither pushed nor fetched, and the first entry
-/// or leaf that starts at or behind the closest hit's reach ends the ray (entries
+/// or leaf that starts at or behind the closest hit's reach ends the ray (robust:
+/// once there is a hit: `State::starts_behind`; entries
 /// lie front to back), unless the ray lies in a split plane: then only that entry
 /// or leaf is skipped, its node still fetched (as the kernel's careful pass does;
 /// its fast pass lists such rays).
@@ -48,7 +48,7 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
                 continue;
             }
         } else {
-            let behind = !starts_before(t0, s.reach());
+            let behind = s.starts_behind(t0);
             if behind && !in_plane {
                 return true;
             }
@@ -61,7 +61,7 @@ pub(super) fn trace_stack(s: &mut State, mut t0: f32, mut t1: f32) -> bool {
         }
         sp -= 1;
         (node, t0, t1) = stack[sp];
-        dropped = !starts_before(t0, s.reach());
+        dropped = s.starts_behind(t0);
         if dropped && !in_plane {
             return true;
         }
