@@ -427,6 +427,22 @@ impl Verdict {
 /// coordinates involved (origin, hit point): 2^-16, about 256 f32 ulps.
 pub const POSITION_TOLERANCE: f64 = 1.0 / 65536.0;
 
+/// Position tolerance of the verdicts relative to a triangle's own coordinates
+/// (their largest magnitude): 2^-40. A point nearer a triangle than this cannot
+/// be told off it: the distance, computed in f64, carries rounding of a few
+/// 2^-53 of those coordinates, the tracers' float-float settles hits to about
+/// 2^-46 of them, and their on-edge band is 2^-40 (ACCURACY.md). It matters only
+/// where the ray's origin and hit point are far smaller than the triangle (a
+/// hit beside the world origin on a unit-sized triangle), so that
+/// [`POSITION_TOLERANCE`] alone would demand more than f64 can measure.
+pub const TRIANGLE_TOLERANCE: f64 = 1.0 / 1_099_511_627_776.0;
+
+/// [`TRIANGLE_TOLERANCE`] for `tri`.
+fn triangle_tolerance(tri: &[Vec3; 3]) -> f64 {
+    let m = tri.iter().fold(0.0f32, |m, v| m.max(v.abs().max_element()));
+    TRIANGLE_TOLERANCE * m as f64
+}
+
 /// The verdict on a tracer's closest hit `hit` for `ray`, against `exact`
 /// (from [`closest_exact`]). Also returns the distance between the tracer's
 /// and the exact hit point when both hit (0 otherwise).
@@ -451,7 +467,10 @@ pub fn judge(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit, exact: &Exact) -> (V
         let near_bound = |b: f32| b.is_finite() && ((t - b as f64) * d.length()).abs() <= tol;
         near_bound(ray.tmin)
             || near_bound(ray.tmax)
-            || ties.iter().all(|&i| boundary_distance(p, &triangles[i as usize]) <= tol)
+            || ties.iter().all(|&i| {
+                let tri = &triangles[i as usize];
+                boundary_distance(p, tri) <= tol.max(triangle_tolerance(tri))
+            })
     };
     if hit.prim_id == PRIM_MISS {
         return match exact {
@@ -468,7 +487,8 @@ pub fn judge(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit, exact: &Exact) -> (V
     let tol = tol_at(p);
     let tol_t = tol / d.length();
     let t_in_bounds = hit.t as f64 >= ray.tmin as f64 - tol_t && hit.t as f64 <= ray.tmax as f64 + tol_t;
-    if !(t_in_bounds && point_triangle_distance(p, &triangles[prim as usize]) <= tol) {
+    let tri = &triangles[prim as usize];
+    if !(t_in_bounds && point_triangle_distance(p, tri) <= tol.max(triangle_tolerance(tri))) {
         return (Verdict::FalseHit, 0.0);
     }
     let Exact::Hit { ties, t } = exact else { return (Verdict::GrazingHit, 0.0) };
@@ -614,6 +634,24 @@ mod tests {
         let exact = closest_exact(&tris, &shadow);
         assert_eq!(judge_any(&tris, &shadow, &hit(0, 2.0), &exact), Verdict::Same);
         assert_eq!(judge_any(&tris, &shadow, &Hit::MISS, &exact), Verdict::MissedHit);
+    }
+
+    /// Beside the world origin on a unit-sized triangle, a point 2^-45 off the
+    /// triangle (t off by 1/32 of itself; float-float settles t to ~2^-46 of the
+    /// triangle's coordinates) is no FALSE HIT, though it lies far beyond 2^-16
+    /// of the origin's and the point's own magnitude (2^-40); 2^-35 off is.
+    #[test]
+    fn tolerance_includes_the_triangle_scale() {
+        let tris = quad();
+        let tiny = 2f32.powi(-40);
+        let ray = Ray::new(Vec3::new(tiny, 0.5 * tiny, tiny), Vec3::new(0.0, 0.0, -1.0), 0.0, f32::INFINITY);
+        let exact = closest_exact(&tris, &ray);
+        assert_eq!(exact, Exact::Hit { ties: vec![0], t: tiny as f64 });
+        let hit = |t: f32| Hit { t, prim_id: 0, u: 0.0, v: 0.0 };
+        let near = judge(&tris, &ray, &hit(tiny - 2f32.powi(-45)), &exact).0;
+        assert!(!near.is_serious(), "{near:?}");
+        let far = judge(&tris, &ray, &hit(tiny + 2f32.powi(-35)), &exact).0;
+        assert_eq!(far, Verdict::FalseHit);
     }
 
     /// A long direction (t near 2^-20) through the shared diagonal: both

@@ -652,7 +652,7 @@ fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact:
 
 mod gpu;
 pub use crate::abi::GpuInstanceHit;
-pub use gpu::{TwoLevelBinding, TwoLevelTracer};
+pub use gpu::{TwoLevelBinding, TwoLevelTraceResult, TwoLevelTracer};
 
 /// Whether a world-to-object matrix is exactly the identity (its object rays
 /// are the world rays themselves).

@@ -22,7 +22,7 @@ use glam::Vec3;
 use kdtrace::exact::Exact;
 use kdtrace::gpu::GpuContext;
 use kdtrace::kdtree::links::TreeLinks;
-use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
+use kdtrace::kdtree::traverse::{trace_packet_logged, trace_ray, SceneRef, Traversal, Variant};
 use kdtrace::kdtree::{BuildConfig, KdTree};
 use kdtrace::raygen::SplitMix64;
 use kdtrace::scene::Scene;
@@ -328,12 +328,14 @@ fn voxel_faces(seed: u64) -> Vec<[Vec3; 3]> {
 }
 
 /// Segments that end exactly on a face lying in a split plane (`tmax` = 1 at a
-/// face's centre, from near and from 1e5-1e6 away, where the segment frame is
-/// shifted): the plane's rounded `t` may pass the segment's end, and the entry
+/// face's centre, 3,040 rays from 16, 1e3, 1e5 and 1e6 away, where the segment
+/// frame is shifted): the plane's rounded `t` may pass the segment's end, and the entry
 /// beyond it, clamped to start there, must still be visited while there is no
 /// hit (`starts_behind` in leaf.glsl: `stack` once ended such rays at that
-/// entry, a miss). Every ray must agree with the exact reference, robust `stack`
-/// on the GPU (closest and any hit) and its CPU twin.
+/// entry, a miss; `backtrack`, `ropes` and the packet short stacks ended them at
+/// the leaf before, see their GLSL). Every ray must agree with the exact
+/// reference, for each robust variant on the GPU (closest and any hit) and its
+/// CPU twin (the packet twin for packets).
 #[test]
 fn segments_ending_on_split_planes_keep_their_hit() {
     let ctx = context();
@@ -342,34 +344,60 @@ fn segments_ending_on_split_planes_keep_their_hit() {
     let links = TreeLinks::new(&tree.nodes, tree.bounds);
     let mut rng = SplitMix64(3);
     let mut rays = Vec::new();
-    for (i, t) in triangles.iter().enumerate().step_by(2) {
+    for t in triangles.iter().step_by(2) {
         // The quad's centre (its diagonal's midpoint), exact in f32.
         let end = (t[0] + t[2]) * 0.5;
-        let far = i % 4 == 0;
-        // Offsets in steps of 1/8, so that origin + 1 * dir == end exactly.
-        let reach = if far { 1.0e6 } else { 16.0 };
-        let offset = (rng.unit_vector() * reach * 8.0).round() / 8.0;
-        if offset.length() < 1.0 {
-            continue;
+        for reach in [16.0, 1.0e3, 1.0e5, 1.0e6] {
+            // Offsets in steps of 1/8, so that origin + 1 * dir == end exactly.
+            let offset = (rng.unit_vector() * reach * 8.0).round() / 8.0;
+            if offset.length() < 1.0 {
+                continue;
+            }
+            rays.push(Ray::new(end - offset, offset, 0.0, 1.0));
         }
-        rays.push(Ray::new(end - offset, offset, 0.0, 1.0));
     }
     let exacts = exact_answers(&triangles, &rays);
     let mut tracer = Tracer::new(&ctx, &tree, &triangles).unwrap();
-    let stack = Traversal::closest(Variant::Stack);
-    for (label, hits, any_hit) in [
-        ("GPU", tracer.trace(&rays, &TraceOptions::new(stack)).unwrap().hits, false),
-        ("CPU twin", cpu_hits(&tree, &triangles, &links, &rays, stack), false),
-        (
-            "GPU any-hit",
-            tracer.trace(&rays, &TraceOptions::new(Traversal { any_hit: true, ..stack })).unwrap().hits,
-            true,
-        ),
-    ] {
-        let t = judge_with(&triangles, &rays, &hits, &exacts, any_hit);
-        println!("{}\n{}", table_header(), table_row(label, &t));
-        assert_eq!((t.agreeing(), t.serious()), (rays.len(), 0), "{label}: {} rays", rays.len());
+    let scene = SceneRef::new(&tree, &triangles).with_links(&links);
+    // Every variant that once ended such a ray before its hit (stack, backtrack,
+    // ropes, packet short stacks), and the restart-based one that did not.
+    let variants = [
+        Traversal::closest(Variant::Stack),
+        Traversal::closest(Variant::Backtrack),
+        Traversal::closest(Variant::Ropes),
+        Traversal::closest(Variant::ShortStack),
+        Traversal { packet_width: 4, ..Traversal::closest(Variant::ShortStack) },
+        Traversal { packet_width: 8, ..Traversal::closest(Variant::PushDownShortStack) },
+    ];
+    let mut failures = Vec::new();
+    for closest in variants {
+        let any = Traversal { any_hit: true, ..closest };
+        let twin = |traversal: Traversal| -> Vec<Hit> {
+            if traversal.packet_width == 1 {
+                return cpu_hits(&tree, &triangles, &links, &rays, traversal);
+            }
+            let width = traversal.packet_width as usize;
+            let packets = rays.chunks(width).map(|p| trace_packet_logged(&scene, p, traversal, None).unwrap());
+            packets.flatten().map(|(hit, _)| hit).collect()
+        };
+        for (mode, traversal, any_hit) in [("closest", closest, false), ("any hit", any, true)] {
+            let gpu = tracer.trace(&rays, &TraceOptions::new(traversal)).unwrap().hits;
+            for (side, hits) in [("GPU", gpu), ("CPU twin", twin(traversal))] {
+                let label = format!("{} {mode} {side}", describe(&traversal));
+                let t = judge_with(&triangles, &rays, &hits, &exacts, any_hit);
+                println!("{}\n{}", table_header(), table_row(&label, &t));
+                if (t.agreeing(), t.serious()) != (rays.len(), 0) {
+                    failures.push(format!(
+                        "{label}: {} of {} agree, {} serious",
+                        t.agreeing(),
+                        rays.len(),
+                        t.serious()
+                    ));
+                }
+            }
+        }
     }
+    assert!(failures.is_empty(), "{failures:#?}");
     drop(tracer);
     assert_validation_clean(&ctx);
 }

@@ -624,3 +624,65 @@ fn host_read_barrier(ctx: &kdtrace::gpu::GpuContext, cmd: kdtrace::ash::vk::Comm
     // SAFETY: a barrier in a command buffer the caller is recording.
     unsafe { ctx.device.cmd_pipeline_barrier(cmd, compute, host, vk::DependencyFlags::empty(), &barrier, &[], &[]) };
 }
+
+/// `TwoLevelTracer::trace_stats` reports the careful pass's listed rays as
+/// `Tracer::trace` does: for one identity instance (the same tree and object
+/// rays as the single level) the same count on rays leaving the surface (which
+/// the fast pass lists) and on random rays, the same hits and `None` for plain
+/// traces; six instances list rays too.
+#[test]
+fn two_level_traces_report_the_careful_pass() {
+    use kdtrace::trace::{TraceOptions, Tracer};
+    let ctx = common::context();
+    let config = BuildConfig::default();
+    let sphere = common::sphere(2, 0.2, 9);
+    let geometry = BottomLevel::new(3, sphere.clone(), &config);
+    let tree = geometry.tree.clone();
+    let identity = Instance { geometry: 0, transform: Affine3A::IDENTITY, instance_id: 0, mask: 0xff };
+    let scene = TwoLevelScene::new(vec![geometry], &[identity]).unwrap();
+    let mut two = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    let mut one = Tracer::new(&ctx, &tree, &sphere).unwrap();
+    let mut rng = common::Rng(5);
+    let mut rays: Vec<Ray> =
+        sphere.iter().take(300).map(|t| Ray::new(t[0], rng.unit_vector(), 0.0, f32::INFINITY)).collect();
+    rays.extend(common::random_rays(&mut rng, Vec3::splat(-1.2), Vec3::splat(1.2), 300));
+    for traversal in [
+        Traversal::closest(Variant::Stack),
+        Traversal { any_hit: true, ..Traversal::closest(Variant::ShortStack) },
+        Traversal { robust: false, ..Traversal::closest(Variant::Stack) },
+    ] {
+        let single = one.trace(&rays, &TraceOptions::new(traversal)).unwrap();
+        let result = two.trace_stats(&rays, 0xff, traversal).unwrap();
+        assert_eq!(result.careful_rays, single.careful_rays, "{traversal:?}");
+        if traversal.robust {
+            assert!(single.careful_rays.unwrap() > 0, "{traversal:?}: no ray listed");
+        }
+        for (i, (h, s)) in result.hits.iter().zip(&single.hits).enumerate() {
+            assert_eq!(h.is_hit(), s.is_hit(), "{traversal:?} ray {i}");
+            if s.is_hit() {
+                assert_eq!((h.t.to_bits(), h.prim_index), (s.t.to_bits(), s.prim_id), "{traversal:?} ray {i}");
+            }
+        }
+    }
+    // Six instances: the count is the two-level kernel's own (its object rays).
+    let six: Vec<Instance> = (0..6)
+        .map(|i| Instance {
+            geometry: 0,
+            transform: Affine3A::from_rotation_translation(
+                Quat::from_rotation_z(0.5 * i as f32),
+                Vec3::X * 2.5 * i as f32,
+            ),
+            instance_id: i,
+            mask: 0xff,
+        })
+        .collect();
+    let geometry = BottomLevel::new(3, sphere, &config);
+    let scene = TwoLevelScene::new(vec![geometry], &six).unwrap();
+    let mut two = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    let robust = two.trace_stats(&rays, 0xff, Traversal::closest(Variant::Stack)).unwrap();
+    assert!(robust.careful_rays.unwrap() > 0 && robust.careful_rays.unwrap() <= rays.len() as u64);
+    let plain = Traversal { robust: false, ..Traversal::closest(Variant::Stack) };
+    assert_eq!(two.trace_stats(&rays, 0xff, plain).unwrap().careful_rays, None);
+    drop((one, two));
+    common::assert_validation_clean(&ctx);
+}

@@ -55,7 +55,23 @@ bool trace_backtrack(TraceRay r, float t0, float t1_scene, inout Closest best, i
         if (fallback) break;
         uint leaf = visit_leaf(r, n, t1, best, c);
         if (leaf == LEAF_CUT) return false;
-        if (leaf == LEAF_DONE || t1 >= t1_scene) return true;
+        if (leaf == LEAF_DONE) return true;
+        if (t1 >= t1_scene) {
+            // Robust, before the first hit, on a segment that ends at tmax (not
+            // at the scene's box; then best.hit.t is tmax's bound): a segment that
+            // ends within rounding of a face of the leaf's box with a leaf across
+            // it may end exactly on a triangle of that leaf in the face's plane.
+            if (!ROBUST || best.hit.prim_id != PRIM_MISS || t1_scene < best.hit.t) return true;
+            uint face;
+            float t_next;
+            float leaf_exit = box_exit(r, node, face, t_next);
+            if (!near_t0(r, leaf_exit, t1_scene) || all(equal(box_face_plane(node, face), box_face_plane(0u, face)))) {
+                return true;
+            }
+            t0 = t1;
+            fallback = true;
+            break;
+        }
         if (ROBUST) {
             // Left near an edge or corner of the leaf's box: a second face within rounding.
             uint leaf_face;

@@ -58,7 +58,20 @@ bool trace_ropes(TraceRay r, float t0, float t1_scene, inout Closest best, inout
         float leaf_t1 = min(min(exit_t, t1_scene), t1);
         uint leaf = visit_leaf(r, n, leaf_t1, best, c);
         if (leaf == LEAF_CUT) return false;
-        if (leaf == LEAF_DONE || leaf_t1 >= t1_scene) return true;
+        if (leaf == LEAF_DONE) return true;
+        if (leaf_t1 >= t1_scene) {
+            // ROBUST, before the first hit, on a segment that ends at tmax (not
+            // at the scene's box; then best.hit.t is tmax's bound): a segment that
+            // ends within rounding of a face with a leaf across it may end exactly
+            // on a triangle of that leaf lying in the face's plane.
+            bool at_tmax = ROBUST && best.hit.prim_id == PRIM_MISS && !(t1_scene < best.hit.t);
+            if (!(at_tmax && near_t0(r, exit_t, t1_scene) && ropes[node * 6u + face] != NO_ROPE)) {
+                return true;
+            }
+            t0 = max(t0, leaf_t1);
+            fallback = true;
+            break;
+        }
         if (ROBUST && (leaf_t1 != exit_t || near_t0(r, t_next, exit_t) || near_t0(r, exit_t, t0))) {
             // Left near an edge or corner of the leaf (or a sliver of it).
             t0 = max(t0, leaf_t1);

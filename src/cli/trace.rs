@@ -162,17 +162,21 @@ pub fn trace(args: TraceArgs) -> Result<()> {
         _ => eprintln!("traversal ({}): the device has no timestamps; wall incl. transfers {:.3} ms", label, wall * 1e3),
     }
     if let Some(n) = result.careful_rays {
-        eprintln!(
-            "careful pass: {n} of {} rays ({:.2} %) traced again by the robust careful pass",
-            rays.len(),
-            100.0 * n as f64 / rays.len().max(1) as f64
-        );
+        print_careful(n, rays.len());
     }
     stages.print();
     match Unfinished::from_hits(&result.hits) {
         Some(u) => Err(u.into()),
         None => Ok(()),
     }
+}
+
+/// The careful pass's share of the rays.
+fn print_careful(listed: u64, rays: usize) {
+    eprintln!(
+        "careful pass: {listed} of {rays} rays ({:.2} %) traced again by the robust careful pass",
+        100.0 * listed as f64 / rays.max(1) as f64
+    );
 }
 
 /// `kdtrace trace --two-level`.
@@ -187,10 +191,11 @@ fn trace_two_level(args: &TraceArgs, traversal: Traversal, rays: &[kdtrace::Ray]
     let mut tracer = TwoLevelTracer::new(&ctx, &scene)?;
     tracer.prepare(traversal)?;
     stages.mark("upload the scene and compile");
-    let (hits, seconds) = tracer.trace_timed(rays, 0xff, traversal)?;
+    let result = tracer.trace_stats(rays, 0xff, traversal)?;
     stages.mark("trace");
     // Back to the flattened scene's numbering.
-    let hits: Vec<kdtrace::Hit> = hits
+    let hits: Vec<kdtrace::Hit> = result
+        .hits
         .iter()
         .map(|h| {
             let prim_id = match ranges.get(h.instance_index as usize) {
@@ -211,13 +216,16 @@ fn trace_two_level(args: &TraceArgs, traversal: Traversal, rays: &[kdtrace::Ray]
         scene.instance_count(),
         tracer.device_bytes() as f64 / (1 << 20) as f64
     );
-    if let Some(s) = seconds.filter(|&s| s > 0.0) {
+    if let Some(s) = result.gpu_seconds.filter(|&s| s > 0.0) {
         eprintln!(
             "two-level traversal ({}): {:.3} ms GPU = {:.2} M rays/s",
             traversal.variant.name(),
             s * 1e3,
             rays.len() as f64 / s / 1e6
         );
+    }
+    if let Some(n) = result.careful_rays {
+        print_careful(n, rays.len());
     }
     stages.print();
     match Unfinished::from_hits(&hits) {

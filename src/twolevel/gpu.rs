@@ -13,17 +13,29 @@ use gpu_allocator::MemoryLocation;
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES,
-    TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
-    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
-    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
-    TRACE_WORKGROUP_SIZE,
+    CAREFUL_COUNT, CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL,
+    TL_BINDING_GEOMETRIES, TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES,
+    TL_BINDING_ORDER, TL_BINDING_TOP, TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
+    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
+    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
 use crate::trace::{buffer_barrier, compile_args_kernel, record_fast_then_careful, IndirectArgs};
 use crate::traversal::{Traversal, Variant};
+
+/// What [`TwoLevelTracer::trace_stats`] returns.
+#[derive(Clone, Debug)]
+pub struct TwoLevelTraceResult {
+    /// One hit per ray, in ray order.
+    pub hits: Vec<InstanceHit>,
+    /// GPU time of the trace dispatches (timestamps), where the queue has them.
+    pub gpu_seconds: Option<f64>,
+    /// Robust traces: how many rays the fast pass listed for the careful pass
+    /// (as [`crate::trace::TraceResult::careful_rays`]); `None` for `--plain`.
+    pub careful_rays: Option<u64>,
+}
 
 /// A [`TwoLevelScene`] on a device. Geometries are uploaded once;
 /// [`TwoLevelTracer::set_instances`] uploads only the instances and the top
@@ -426,9 +438,18 @@ impl TwoLevelTracer {
         mask: u8,
         traversal: Traversal,
     ) -> Result<(Vec<InstanceHit>, Option<f64>)> {
+        let result = self.trace_stats(rays, mask, traversal)?;
+        Ok((result.hits, result.gpu_seconds))
+    }
+
+    /// [`TwoLevelTracer::trace`] with what [`crate::trace::Tracer::trace`] also
+    /// reports: the GPU time and, for robust traces, how many rays the fast pass
+    /// listed for the careful pass ([`crate::trace::TraceResult::careful_rays`]).
+    pub fn trace_stats(&mut self, rays: &[Ray], mask: u8, traversal: Traversal) -> Result<TwoLevelTraceResult> {
         self.prepare(traversal)?;
         if rays.is_empty() {
-            return Ok((Vec::new(), None));
+            let careful_rays = traversal.robust.then_some(0);
+            return Ok(TwoLevelTraceResult { hits: Vec::new(), gpu_seconds: None, careful_rays });
         }
         let ray_bytes: &[u8] = bytemuck::cast_slice(rays);
         let mut ray_buf =
@@ -439,6 +460,17 @@ impl TwoLevelTracer {
         // SAFETY: both buffers are this tracer's own storage buffers, alive until the wait.
         let binding = unsafe { self.bind(BufferRange::whole(&ray_buf), BufferRange::whole(&hit_buf), traversal)? };
         let timestamps = Timestamps::new(&self.ctx, 2)?;
+        // The careful pass's count (word CAREFUL_COUNT of the list), copied back.
+        let careful_count = match traversal.robust {
+            true => Some(Buffer::new(
+                &self.ctx,
+                4,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+                "two-level careful count",
+            )?),
+            false => None,
+        };
         let mut recorded = Ok(());
         self.ctx.submit_and_wait(|cmd| {
             // SAFETY: `cmd` is recording; the binding's buffers outlive the wait.
@@ -451,15 +483,36 @@ impl TwoLevelTracer {
                 if let Some(t) = &timestamps {
                     t.record(cmd, 1);
                 }
+                if let Some(count) = &careful_count {
+                    let list = BufferRange::whole(&binding.list);
+                    let barrier = buffer_barrier(list, vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::TRANSFER_READ);
+                    self.ctx.device.cmd_pipeline_barrier(
+                        cmd,
+                        vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
+                        vk::PipelineStageFlags::TRANSFER,
+                        vk::DependencyFlags::empty(),
+                        &[],
+                        &[barrier],
+                        &[],
+                    );
+                    let region = vk::BufferCopy { src_offset: CAREFUL_COUNT as u64 * 4, dst_offset: 0, size: 4 };
+                    self.ctx.device.cmd_copy_buffer(cmd, binding.list.buffer, count.buffer, &[region]);
+                }
+                // Make the shader and transfer writes visible to the host reads below.
+                self.ctx.record_host_read_barrier(cmd);
             }
         })?;
         recorded?;
-        let seconds = match &timestamps {
-            Some(t) => Some(t.seconds_between(0, 1)?),
+        let gpu_seconds = match &timestamps {
+            Some(t) if !self.ctx.timestamps_unreliable() => Some(t.seconds_between(0, 1)?),
+            _ => None,
+        };
+        let careful_rays = match &careful_count {
+            Some(count) => Some(u64::from(bytemuck::cast_slice::<u8, u32>(count.read(0, 4)?)[0])),
             None => None,
         };
         let hits: &[GpuInstanceHit] = bytemuck::cast_slice(hit_buf.read(0, hit_bytes as usize)?);
-        Ok((hits.iter().map(InstanceHit::from).collect(), seconds))
+        Ok(TwoLevelTraceResult { hits: hits.iter().map(InstanceHit::from).collect(), gpu_seconds, careful_rays })
     }
 
     /// A binding of your ray range (32-byte [`Ray`]s, world space) and hit range
@@ -521,7 +574,10 @@ impl TwoLevelTracer {
         // Robust traces list rays for the careful pass; plain ones bind a list
         // they never touch.
         let words = CAREFUL_HEADER_WORDS as u64 + if traversal.robust { u64::from(capacity) } else { 0 };
-        let usage = STORAGE | vk::BufferUsageFlags::INDIRECT_BUFFER | vk::BufferUsageFlags::TRANSFER_DST;
+        let usage = STORAGE
+            | vk::BufferUsageFlags::INDIRECT_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::TRANSFER_SRC;
         let list = Buffer::new(&self.ctx, words * 4, usage, MemoryLocation::GpuOnly, "two-level careful list")?;
         let mut ranges = [rays; TL_BINDINGS as usize];
         for (binding, buffer) in [

@@ -5,7 +5,7 @@ use super::decide::{decide_children, node_plane, ExitPlane, Visit};
 use super::restart::trace_restart_exact;
 use super::segment::glsl_min;
 use super::State;
-use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS};
+use crate::consts::{MAX_STACK, MAX_TRAVERSAL_STEPS, PRIM_MISS};
 use crate::kdtree::links::TreeLinks;
 
 /// Twin of `trace_backtrack` in glsl/traverse/backtrack.glsl.
@@ -37,7 +37,22 @@ pub(super) fn trace_backtrack(s: &mut State, links: &TreeLinks, mut t0: f32, t1_
             }
             continue;
         }
-        if s.leaf(n, t1) || t1 >= t1_scene {
+        if s.leaf(n, t1) {
+            return true;
+        }
+        if t1 >= t1_scene {
+            // Robust, before the first hit, on a segment that ends at tmax (not at
+            // the scene's box; then best.hit.t is tmax's bound): a segment that
+            // ends within rounding of a face of the leaf's box with a leaf across it
+            // may end exactly on a triangle of that leaf in the face's plane.
+            if !robust || s.best.hit.prim_id != PRIM_MISS || t1_scene < s.best.hit.t {
+                return true;
+            }
+            let (leaf_exit, face, _) = box_exit(s.r, &links.boxes[node as usize]);
+            let inner = box_face_plane(&links.boxes[node as usize], face) != box_face_plane(&links.boxes[0], face);
+            if near_t0(s.r, leaf_exit, t1_scene) && inner {
+                return trace_restart_exact(s, t_scene0, t1_scene, true, t1);
+            }
             return true;
         }
         if robust {

@@ -309,7 +309,12 @@ pub(super) fn trace_packet_short_stack(
                             l.t_gap = glsl_min(l.t_gap, lost_t0);
                         }
                     }
-                    if !(lane.r.any_hit && done[i]) && (l.in_plane || l.t_gap < lane.best.reach()) {
+                    // Before the first hit an entry clamped to start at the
+                    // segment's end may still hold a hit exactly at tmax.
+                    let reach = lane.best.reach();
+                    let no_hit = lane.best.hit.prim_id == PRIM_MISS;
+                    let lost = l.t_gap < reach || (no_hit && l.t_gap <= reach);
+                    if !(lane.r.any_hit && done[i]) && (l.in_plane || lost) {
                         l.fallback = true;
                         l.t_from = if l.in_plane { -f32::MAX } else { l.t_gap };
                     }

@@ -6,7 +6,7 @@ use super::decide::{decide_children, ExitPlane, Visit};
 use super::restart::trace_restart_exact;
 use super::segment::{glsl_max, glsl_min};
 use super::State;
-use crate::consts::MAX_TRAVERSAL_STEPS;
+use crate::consts::{MAX_TRAVERSAL_STEPS, PRIM_MISS};
 use crate::kdtree::links::{TreeLinks, NO_ROPE};
 
 /// Twin of `trace_ropes` in glsl/traverse/ropes.glsl.
@@ -39,7 +39,19 @@ pub(super) fn trace_ropes(s: &mut State, links: &TreeLinks, mut t0: f32, t1_scen
         let b = &links.boxes[node as usize];
         let (exit, face, t_next) = box_exit(s.r, b);
         let leaf_t1 = glsl_min(glsl_min(exit, t1_scene), t1);
-        if s.leaf(n, leaf_t1) || leaf_t1 >= t1_scene {
+        if s.leaf(n, leaf_t1) {
+            return true;
+        }
+        if leaf_t1 >= t1_scene {
+            // Robust, before the first hit, on a segment that ends at tmax (not at
+            // the scene's box; then best.hit.t is tmax's bound): a segment that
+            // ends within rounding of a face with a leaf across it may end exactly
+            // on a triangle of that leaf lying in the face's plane.
+            let ends_at_box = t1_scene < s.best.hit.t;
+            let at_tmax = robust && s.best.hit.prim_id == PRIM_MISS && !ends_at_box;
+            if at_tmax && near_t0(s.r, exit, t1_scene) && links.ropes[node as usize][face] != NO_ROPE {
+                return trace_restart_exact(s, t_scene0, t1_scene, true, glsl_max(t0, leaf_t1));
+            }
             return true;
         }
         if robust && (leaf_t1 != exit || near_t0(s.r, t_next, exit) || near_t0(s.r, exit, t0)) {
