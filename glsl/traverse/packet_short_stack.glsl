@@ -118,10 +118,12 @@ bool trace_packet_short_stack(bool alive, TraceRay r, float t_start, float t1_sc
                         float lost_t0 = stack_t0[slot], lost_t1 = stack_t1[slot];
                         if (lost_t0 <= lost_t1) t_gap = min(t_gap, lost_t0);
                     }
-                    // Before the first hit an entry clamped to start at the
-                    // segment's end may still hold a hit exactly at tmax.
-                    bool no_hit = best.hit.prim_id == PRIM_MISS;
-                    bool lost = t_gap < best_reach(best) || (no_hit && t_gap <= best_reach(best));
+                    // Before the first hit, on a segment that ends at tmax (not at
+                    // the scene's box; then best.hit.t is tmax's bound), an entry
+                    // clamped to start at the segment's end may still hold a hit
+                    // exactly at tmax.
+                    bool at_tmax = best.hit.prim_id == PRIM_MISS && !(t1_scene < best.hit.t);
+                    bool lost = t_gap < best_reach(best) || (at_tmax && t_gap <= best_reach(best));
                     if (!(ANY_HIT && done) && (in_plane || lost)) {
                         fallback = true;
                         t_from = in_plane ? -3.40282347e38 : t_gap;

@@ -309,11 +309,14 @@ pub(super) fn trace_packet_short_stack(
                             l.t_gap = glsl_min(l.t_gap, lost_t0);
                         }
                     }
-                    // Before the first hit an entry clamped to start at the
-                    // segment's end may still hold a hit exactly at tmax.
+                    // Before the first hit, on a segment that ends at tmax (not at
+                    // the scene's box; then best.hit.t is tmax's bound), an entry
+                    // clamped to start at the segment's end may still hold a hit
+                    // exactly at tmax.
                     let reach = lane.best.reach();
-                    let no_hit = lane.best.hit.prim_id == PRIM_MISS;
-                    let lost = l.t_gap < reach || (no_hit && l.t_gap <= reach);
+                    let ends_at_box = t1_scene[i] < lane.best.hit.t;
+                    let at_tmax = lane.best.hit.prim_id == PRIM_MISS && !ends_at_box;
+                    let lost = l.t_gap < reach || (at_tmax && l.t_gap <= reach);
                     if !(lane.r.any_hit && done[i]) && (l.in_plane || lost) {
                         l.fallback = true;
                         l.t_from = if l.in_plane { -f32::MAX } else { l.t_gap };
