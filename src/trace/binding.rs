@@ -143,6 +143,35 @@ pub(crate) struct IndirectArgs {
 
 /// The kernel that turns a caller's count into a binding's arguments
 /// (glsl/indirect_args.comp).
+/// Records the copy of a careful list's count (word `CAREFUL_COUNT`) into the
+/// first word of `dst`, after the passes that wrote it (a barrier first).
+///
+/// # Safety
+/// `cmd` is recording; both buffers outlive its execution.
+pub(crate) unsafe fn record_careful_count_copy(
+    device: &ash::Device,
+    cmd: vk::CommandBuffer,
+    list: &Buffer,
+    dst: &Buffer,
+) {
+    let barrier =
+        buffer_barrier(BufferRange::whole(list), vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::TRANSFER_READ);
+    let region = vk::BufferCopy { src_offset: u64::from(crate::consts::CAREFUL_COUNT) * 4, dst_offset: 0, size: 4 };
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[barrier],
+            &[],
+        );
+        device.cmd_copy_buffer(cmd, list.buffer, dst.buffer, &[region]);
+    }
+}
+
 pub(crate) fn compile_args_kernel(ctx: &Arc<GpuContext>) -> Result<Kernel> {
     Kernel::new(
         ctx,

@@ -124,8 +124,8 @@ use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use crate::consts::{
-    CAREFUL_COUNT, COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS,
-    COUNTER_TRIANGLES, TRACE_WORKGROUP_SIZE,
+    COUNTERS_PER_RAY, COUNTER_DROPS, COUNTER_LEAVES, COUNTER_NODES, COUNTER_RESTARTS, COUNTER_STEPS, COUNTER_TRIANGLES,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Hit, Ray};
@@ -142,7 +142,9 @@ mod pipelines;
 pub(crate) mod scene;
 
 pub use binding::TraceBinding;
-pub(crate) use binding::{buffer_barrier, compile_args_kernel, record_fast_then_careful, IndirectArgs};
+pub(crate) use binding::{
+    buffer_barrier, compile_args_kernel, record_careful_count_copy, record_fast_then_careful, IndirectArgs,
+};
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES, WORD_BYTES};
 pub(crate) use pipelines::compile_passes;
@@ -491,23 +493,7 @@ impl Tracer {
                         ts.record(cmd, 1);
                     }
                     if let (Some(list), Some(count)) = (&binding.careful, &careful_count) {
-                        let barrier = binding::buffer_barrier(
-                            BufferRange::whole(list),
-                            vk::AccessFlags::SHADER_WRITE,
-                            vk::AccessFlags::TRANSFER_READ,
-                        );
-                        ctx.device.cmd_pipeline_barrier(
-                            cmd,
-                            vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
-                            vk::PipelineStageFlags::TRANSFER,
-                            vk::DependencyFlags::empty(),
-                            &[],
-                            &[barrier],
-                            &[],
-                        );
-                        let at = CAREFUL_COUNT as u64 * WORD_BYTES;
-                        let region = vk::BufferCopy { src_offset: at, dst_offset: 0, size: WORD_BYTES };
-                        ctx.device.cmd_copy_buffer(cmd, list.buffer, count.buffer, &[region]);
+                        binding::record_careful_count_copy(&ctx.device, cmd, list, count);
                     }
                     // Make the shader writes visible to the host reads below.
                     ctx.record_host_read_barrier(cmd);

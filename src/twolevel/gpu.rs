@@ -13,16 +13,18 @@ use gpu_allocator::MemoryLocation;
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
-    CAREFUL_COUNT, CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL,
-    TL_BINDING_GEOMETRIES, TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES,
-    TL_BINDING_ORDER, TL_BINDING_TOP, TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
-    TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
-    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES,
+    TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
+    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
+    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
 use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::trace::{buffer_barrier, compile_args_kernel, record_fast_then_careful, IndirectArgs};
+use crate::trace::{
+    buffer_barrier, compile_args_kernel, record_careful_count_copy, record_fast_then_careful, IndirectArgs,
+};
 use crate::traversal::{Traversal, Variant};
 
 /// What [`TwoLevelTracer::trace_stats`] returns.
@@ -484,19 +486,7 @@ impl TwoLevelTracer {
                     t.record(cmd, 1);
                 }
                 if let Some(count) = &careful_count {
-                    let list = BufferRange::whole(&binding.list);
-                    let barrier = buffer_barrier(list, vk::AccessFlags::SHADER_WRITE, vk::AccessFlags::TRANSFER_READ);
-                    self.ctx.device.cmd_pipeline_barrier(
-                        cmd,
-                        vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::DRAW_INDIRECT,
-                        vk::PipelineStageFlags::TRANSFER,
-                        vk::DependencyFlags::empty(),
-                        &[],
-                        &[barrier],
-                        &[],
-                    );
-                    let region = vk::BufferCopy { src_offset: CAREFUL_COUNT as u64 * 4, dst_offset: 0, size: 4 };
-                    self.ctx.device.cmd_copy_buffer(cmd, binding.list.buffer, count.buffer, &[region]);
+                    record_careful_count_copy(&self.ctx.device, cmd, &binding.list, count);
                 }
                 // Make the shader and transfer writes visible to the host reads below.
                 self.ctx.record_host_read_barrier(cmd);
