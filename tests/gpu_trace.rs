@@ -8,7 +8,7 @@ use std::sync::Arc;
 use common::{assert_validation_clean, context, random_rays, scene_path, Rng};
 use glam::Vec3;
 use kdtrace::consts::{PRIM_INVALID, PRIM_MISS};
-use kdtrace::exact::tolerant::{agrees, Agreement};
+use kdtrace::exact::tolerant::{Agreement, Reference};
 use kdtrace::gpu::GpuContext;
 use kdtrace::kdtree::links::TreeLinks;
 use kdtrace::kdtree::traverse::{trace_ray, SceneRef, Traversal, Variant};
@@ -43,18 +43,21 @@ fn all_traversals() -> Vec<Traversal> {
     all
 }
 
-/// Checks each scene in turn on one tracer (so each of the 36 kernels compiles
-/// once): `(file, camera resolution, random rays)`. The Stanford scenes may not be
-/// committed: `tools/fetch-scenes` puts them in `scenes/` (CI runs it); without
-/// them they are skipped with a message, except under CI, where that fails.
-fn check_scenes(scenes: &[(&str, (u32, u32), usize)]) {
-    let ctx = context();
+/// Checks each scene in turn: `(file, camera resolution, random rays)`. The
+/// tracers share their pipelines with the other test's (`common::trace`), so each
+/// of the 72 kernels compiles about once in this binary: the stack first (the
+/// baseline), then one test takes the others in order and the other in reverse
+/// (`reverse`), until they meet. The Stanford scenes may not be committed:
+/// `tools/fetch-scenes` puts them in `scenes/` (CI runs it); without them they
+/// are skipped with a message, except under CI, where that fails.
+fn check_scenes(scenes: &[(&str, (u32, u32), usize)], reverse: bool) {
+    let ctx = common::shared_context();
     let mut tracer = None;
     for &(name, size, random) in scenes {
         if common::fetched_scene(name).is_none() {
             continue;
         }
-        check_scene(&ctx, &mut tracer, name, size, random);
+        check_scene(&ctx, &mut tracer, name, size, random, reverse);
     }
     drop(tracer);
     assert_validation_clean(&ctx);
@@ -66,6 +69,7 @@ fn check_scene(
     name: &str,
     (width, height): (u32, u32),
     random: usize,
+    reverse: bool,
 ) {
     let path = scene_path(name);
     let scene = Scene::load(&path).unwrap();
@@ -85,11 +89,19 @@ fn check_scene(
     rays.extend((0..64).map(|_| Ray::new(away, rng.unit_vector().abs() + Vec3::splat(0.01), 0.0, f32::INFINITY)));
 
     let cpu_scene = SceneRef::new(&tree, &scene.triangles).with_links(&links);
+    // The float64 reference of each ray (brute force), for the stack and the plain kernels.
+    let references: Vec<Reference> = rays.iter().map(|ray| Reference::new(&scene.triangles, ray)).collect();
     let mut baseline: Option<Vec<Hit>> = None;
-    for traversal in all_traversals() {
+    // The stack (closest hit) first: it is the baseline of the others.
+    let mut traversals = all_traversals();
+    assert_eq!(traversals[0], Traversal::closest(Variant::Stack));
+    if reverse {
+        traversals[1..].reverse();
+    }
+    for traversal in traversals {
         for any_hit in [false, true] {
             let traversal = Traversal { any_hit, ..traversal };
-            let gpu = tracer.trace(&rays, &TraceOptions::counted(traversal)).unwrap();
+            let gpu = common::trace(tracer, &rays, &TraceOptions::counted(traversal)).unwrap();
             let gpu_counters = gpu.counters.as_ref().unwrap();
             let mut hits = 0;
             let mut grazing = 0;
@@ -108,7 +120,7 @@ fn check_scene(
                 // robust stack: they are checked against the f64 reference instead.
                 let stack_hit = baseline.as_ref().filter(|_| traversal.robust).map(|b| b[i]);
                 match (any_hit, stack_hit) {
-                    (false, None) => match agrees(&scene.triangles, ray, &cpu_hit) {
+                    (false, None) => match references[i].agrees(&cpu_hit) {
                         Agreement::Disagree(why) => disagreements.push(format!("ray {i} {ray:?}: {why}")),
                         Agreement::Grazing => grazing += 1,
                         _ => {}
@@ -173,12 +185,15 @@ fn check_scene(
 // Two tests of about equal work, so the two test threads share it.
 #[test]
 fn cornell_box_teapot_and_bunny_match_cpu_and_reference() {
-    check_scenes(&[("cornell_box.obj", (64, 48), 2000), ("teapot.obj", (64, 48), 3000), ("bunny.obj", (24, 16), 400)]);
+    check_scenes(
+        &[("cornell_box.obj", (64, 48), 2000), ("teapot.obj", (64, 48), 3000), ("bunny.obj", (24, 16), 400)],
+        false,
+    );
 }
 
 #[test]
 fn q3_20kdm2_and_dragon_match_cpu_and_reference() {
-    check_scenes(&[("q3_20kdm2.obj", (64, 48), 3000), ("dragon_200k.obj", (24, 16), 300)]);
+    check_scenes(&[("q3_20kdm2.obj", (64, 48), 3000), ("dragon_200k.obj", (24, 16), 300)], true);
 }
 
 #[test]

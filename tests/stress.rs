@@ -17,7 +17,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{assert_validation_clean, context, scene_path};
+use common::{assert_validation_clean, scene_path};
 use glam::Vec3;
 use kdtrace::exact::Exact;
 use kdtrace::gpu::GpuContext;
@@ -51,7 +51,7 @@ fn batches(tracer: &mut Tracer, triangles: &[[Vec3; 3]], tree: &KdTree, per_cate
         .filter(|(_, rays)| !rays.is_empty())
         .map(|(c, rays)| {
             let exacts = exact_answers(triangles, &rays);
-            let stack = tracer.trace(&rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
+            let stack = common::trace(tracer, &rays, &TraceOptions::variant(Variant::Stack)).unwrap().hits;
             (c, rays, exacts, stack)
         })
         .collect()
@@ -129,7 +129,7 @@ fn scaled_scene(name: &str, scale: f32) -> (Scene, KdTree, TreeLinks) {
 
 /// Stresses each (scene, scale) in turn on one tracer (so each kernel compiles once).
 fn stress_scenes(scenes: &[(&str, f32)]) {
-    let ctx = context();
+    let ctx = common::shared_context();
     let mut tracer = None;
     let mut failures = Vec::new();
     for &(name, scale) in scenes {
@@ -161,7 +161,7 @@ fn stress_scene(
             let mut all = Tally::default();
             for (category, rays, exacts, stack) in &batches {
                 let hits = if gpu {
-                    tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits
+                    common::trace(tracer, rays, &TraceOptions::new(traversal)).unwrap().hits
                 } else {
                     cpu_hits(&tree, triangles, &links, rays, traversal)
                 };
@@ -206,7 +206,7 @@ fn stress_scene(
         let any = Traversal { any_hit: true, ..traversal };
         let mut shadow = Tally::default();
         for (category, rays, exacts, _) in &batches {
-            let hits = tracer.trace(rays, &TraceOptions::new(any)).unwrap().hits;
+            let hits = common::trace(tracer, rays, &TraceOptions::new(any)).unwrap().hits;
             let t = judge_with(triangles, rays, &hits, exacts, true);
             if t.serious() > 0 {
                 failures.push(format!(
@@ -241,7 +241,7 @@ fn stress_shared_scenes() {
 /// at least `CATEGORY_FLOOR` in every category. Under CI a missing scene fails.
 #[test]
 fn stress_deep_trees_and_far_rays() {
-    let ctx = context();
+    let ctx = common::shared_context();
     let mut tracer = None;
     let mut failures = Vec::new();
     for (name, rays_per_category) in [("bunny.obj", 48), ("q3_20kdm2.obj", 48), ("dragon_200k.obj", 24)] {
@@ -258,7 +258,7 @@ fn stress_deep_trees_and_far_rays() {
                 let label = format!("{name} {}{}", describe(&traversal), if any_hit { " any-hit" } else { "" });
                 println!("\n{label}\n{}", table_header());
                 for (category, rays, exacts, stack) in &batches {
-                    let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
+                    let hits = common::trace(tracer, rays, &TraceOptions::new(traversal)).unwrap().hits;
                     let t = judge_with(triangles, rays, &hits, exacts, any_hit);
                     if !any_hit && traversal != Traversal::closest(Variant::Stack) {
                         check_same_primitive(&label, category.name(), rays, &hits, stack, exacts, &mut failures);
@@ -338,7 +338,7 @@ fn voxel_faces(seed: u64) -> Vec<[Vec3; 3]> {
 /// CPU twin (the packet twin for packets).
 #[test]
 fn segments_ending_on_split_planes_keep_their_hit() {
-    let ctx = context();
+    let ctx = common::shared_context();
     let triangles = voxel_faces(17);
     let tree = KdTree::build(&triangles, &BuildConfig::default());
     let links = TreeLinks::new(&tree.nodes, tree.bounds);
@@ -357,7 +357,8 @@ fn segments_ending_on_split_planes_keep_their_hit() {
         }
     }
     let exacts = exact_answers(&triangles, &rays);
-    let mut tracer = Tracer::new(&ctx, &tree, &triangles).unwrap();
+    let mut owned = Tracer::new(&ctx, &tree, &triangles).unwrap();
+    let tracer = &mut owned;
     let scene = SceneRef::new(&tree, &triangles).with_links(&links);
     // Every variant that once ended such a ray before its hit (stack, backtrack,
     // ropes, packet short stacks), and the restart-based one that did not.
@@ -381,7 +382,7 @@ fn segments_ending_on_split_planes_keep_their_hit() {
             packets.flatten().map(|(hit, _)| hit).collect()
         };
         for (mode, traversal, any_hit) in [("closest", closest, false), ("any hit", any, true)] {
-            let gpu = tracer.trace(&rays, &TraceOptions::new(traversal)).unwrap().hits;
+            let gpu = common::trace(tracer, &rays, &TraceOptions::new(traversal)).unwrap().hits;
             for (side, hits) in [("GPU", gpu), ("CPU twin", twin(traversal))] {
                 let label = format!("{} {mode} {side}", describe(&traversal));
                 let t = judge_with(&triangles, &rays, &hits, &exacts, any_hit);
@@ -398,14 +399,14 @@ fn segments_ending_on_split_planes_keep_their_hit() {
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
-    drop(tracer);
+    drop(owned);
     assert_validation_clean(&ctx);
 }
 
 #[test]
 fn stress_rays_gpu_equals_cpu_twin() {
     let mut failures = Vec::new();
-    let ctx = context();
+    let ctx = common::shared_context();
     let mut tracer = None;
     // Every category on the small scenes; on bunny's deep tree the categories that
     // move the ray to the box (far origins, flat axes, huge tmax, segments).
@@ -437,7 +438,7 @@ fn stress_rays_gpu_equals_cpu_twin() {
         for variant in Variant::ALL {
             for any_hit in [false, true] {
                 let traversal = Traversal { any_hit, ..Traversal::closest(variant) };
-                let gpu = tracer.trace(&rays, &TraceOptions::counted(traversal)).unwrap();
+                let gpu = common::trace(tracer, &rays, &TraceOptions::counted(traversal)).unwrap();
                 let counters = gpu.counters.unwrap();
                 let scene_ref = SceneRef::new(&tree, triangles).with_links(&links);
                 let mut differ = 0;
@@ -495,7 +496,7 @@ fn inside_rays(tris: &[[Vec3; 3]], count: usize, seed: u64) -> Vec<Ray> {
 
 #[test]
 fn closed_meshes_have_no_holes() {
-    let ctx = context();
+    let ctx = common::shared_context();
     let meshes = [
         ("icosphere 3", common::sphere(3, 0.0, 1)),
         ("icosphere 5", common::sphere(5, 0.0, 1)),
@@ -512,7 +513,7 @@ fn closed_meshes_have_no_holes() {
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, tris);
         let rays = inside_rays(tris, rays_per_mesh, name.len() as u64);
         for traversal in traversals() {
-            let hits = match tracer.trace(&rays, &TraceOptions::new(traversal)) {
+            let hits = match common::trace(tracer, &rays, &TraceOptions::new(traversal)) {
                 Ok(result) => result.hits,
                 Err(e) => {
                     println!("{name}, {}: {e}", describe(&traversal));
@@ -597,7 +598,7 @@ fn plain_floor(category: Category) -> f64 {
 /// the stack's hits bit for bit.
 #[test]
 fn plain_kernels_and_every_short_stack_size() {
-    let ctx = context();
+    let ctx = common::shared_context();
     let mut tracer = None;
     let mut failures = Vec::new();
     for name in ["cornell_box.obj", "teapot.obj"] {
@@ -615,7 +616,7 @@ fn plain_kernels_and_every_short_stack_size() {
             // Robust short stacks of every size: the stack's hits, bit for bit.
             if traversal.variant.uses_short_stack() && traversal.packet_width == 1 {
                 for (category, rays, _, stack) in &batches {
-                    let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
+                    let hits = common::trace(tracer, rays, &TraceOptions::new(traversal)).unwrap().hits;
                     assert_eq!(hits.len(), stack.len());
                     let differ = hits.iter().zip(stack).filter(|(a, b)| !same_bits(a, b)).count();
                     if differ > 0 {
@@ -630,7 +631,7 @@ fn plain_kernels_and_every_short_stack_size() {
             let traversal = Traversal { robust: false, ..traversal };
             let label = format!("{name} {} plain", describe(&traversal));
             for (category, rays, exacts, _) in &batches {
-                let hits = tracer.trace(rays, &TraceOptions::new(traversal)).unwrap().hits;
+                let hits = common::trace(tracer, rays, &TraceOptions::new(traversal)).unwrap().hits;
                 let t = judge_with(triangles, rays, &hits, exacts, false);
                 let serious_allowed = if *category == Category::InTrianglePlane { t.rays / 50 } else { 0 };
                 if t.incomplete > 0 || t.serious() > serious_allowed || t.agreement() < plain_floor(*category) {

@@ -69,11 +69,11 @@ fn check(name: &str, triangles: Vec<[Vec3; 3]>, rays_per_scene: usize) {
     let cpu = SceneRef::new(&tree, &scene.triangles).with_links(&links);
     let mut rng = Rng(0xDEAD_BEEF);
     let rays = plane_rays(&tree, &mut rng, rays_per_scene);
-    let ctx = context();
+    let ctx = common::shared_context();
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
     let stack: Vec<_> = rays.iter().map(|r| trace_ray(&cpu, r, Variant::Stack).0).collect();
     for traversal in variants() {
-        let gpu = tracer.trace(&rays, &TraceOptions::new(traversal)).unwrap();
+        let gpu = common::trace(&mut tracer, &rays, &TraceOptions::new(traversal)).unwrap();
         let mut differ = 0;
         for (i, ray) in rays.iter().enumerate() {
             let (hit, _) = trace_ray(&cpu, ray, traversal);

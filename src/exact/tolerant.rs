@@ -278,73 +278,99 @@ pub fn hits_near(triangles: &[[Vec3; 3]], ray: &Ray, t: f64, rel_eps: f64) -> Ve
 /// every closer reference hit is marginal; a miss is right only if no triangle
 /// is hit robustly (inside by more than the tolerance).
 pub fn agrees(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit) -> Agreement {
-    use Agreement::*;
-    let Some(r) = RefRay::new(ray) else {
-        return if hit.prim_id == PRIM_INVALID {
-            BothMiss
-        } else {
-            Disagree(format!("invalid ray {ray:?}: expected PRIM_INVALID, got {hit:?}"))
+    Reference::new(triangles, ray).agrees(hit)
+}
+
+/// The f64 reference of one ray over all triangles, computed once: [`agrees`]
+/// for several tracers' hits of the same ray at the cost of one brute force.
+pub struct Reference {
+    ray: Ray,
+    triangle_count: usize,
+    /// `None` for an invalid ray.
+    r: Option<RefRay>,
+    /// Every triangle a tracer may report ([`Exam::marginal`]), in index order.
+    cands: Vec<(u32, Exam)>,
+}
+
+impl Reference {
+    /// Examines every triangle for `ray` (brute force, f64).
+    pub fn new(triangles: &[[Vec3; 3]], ray: &Ray) -> Reference {
+        let r = RefRay::new(ray);
+        let cands = r.as_ref().map(|r| candidates(triangles, r)).unwrap_or_default();
+        Reference { ray: *ray, triangle_count: triangles.len(), r, cands }
+    }
+
+    /// Compares a tracer's closest hit for the ray with the reference (see [`agrees`]).
+    pub fn agrees(&self, hit: &Hit) -> Agreement {
+        use Agreement::*;
+        let ray = &self.ray;
+        let Some(r) = &self.r else {
+            return if hit.prim_id == PRIM_INVALID {
+                BothMiss
+            } else {
+                Disagree(format!("invalid ray {ray:?}: expected PRIM_INVALID, got {hit:?}"))
+            };
         };
-    };
-    let cands = candidates(triangles, &r);
-    let closest = cands
-        .iter()
-        .filter(|(_, e)| e.strict(&r))
-        .min_by(|(i, a), (j, b)| a.t.total_cmp(&b.t).then(i.cmp(j)))
-        .map(|&(i, e)| (i, e));
-    let describe = |what: &str| {
-        let reference = closest.map(|(i, e)| e.to_hit(i));
-        Disagree(format!("{what}; ray {ray:?}, tracer {hit:?}, reference {reference:?}"))
-    };
-    if hit.prim_id == PRIM_MISS {
-        return match (closest, cands.iter().any(|(_, e)| e.robust(&r))) {
-            (None, _) => BothMiss,
-            (Some(_), false) => Grazing,
-            (Some(_), true) => describe("the tracer misses a triangle the ray hits"),
+        let cands = &self.cands;
+        let closest = cands
+            .iter()
+            .filter(|(_, e)| e.strict(r))
+            .min_by(|(i, a), (j, b)| a.t.total_cmp(&b.t).then(i.cmp(j)))
+            .map(|&(i, e)| (i, e));
+        let describe = |what: &str| {
+            let reference = closest.map(|(i, e)| e.to_hit(i));
+            Disagree(format!("{what}; ray {ray:?}, tracer {hit:?}, reference {reference:?}"))
         };
-    }
-    if hit.prim_id >= PRIM_INCOMPLETE {
-        return describe("the tracer returned no valid answer");
-    }
-    let prim = hit.prim_id;
-    if prim as usize >= triangles.len() {
-        return describe("the tracer's triangle index is out of range");
-    }
-    let Some(&(_, e)) = cands.iter().find(|(i, _)| *i == prim) else {
-        return describe("the tracer reports a triangle the ray does not hit");
-    };
-    let t = hit.t as f64;
-    // Written so that a NaN fails the checks.
-    let t_ok = (t - e.t).abs() <= e.t_tol;
-    if !t_ok {
-        return describe(&format!("the tracer's t differs from the reference's {} (tolerance {})", e.t, e.t_tol));
-    }
-    let uv_ok = (hit.u as f64 - e.u).abs() <= e.bary_tol && (hit.v as f64 - e.v).abs() <= e.bary_tol;
-    if !uv_ok {
-        return describe(&format!(
-            "the tracer's u, v differ from the reference's {}, {} (tolerance {})",
-            e.u, e.v, e.bary_tol
-        ));
-    }
-    let Some((closest_prim, c)) = closest else {
-        // The reported triangle is hit only within the tolerance.
-        return Grazing;
-    };
-    if closest_prim == prim {
-        SamePrim
-    } else if (e.t - c.t).abs() <= e.t_tol + c.t_tol {
-        Tie
-    } else if e.t > c.t {
-        // A farther hit: fine only if every closer hit is marginal.
-        let missed = cands.iter().find(|(_, o)| o.robust(&r) && o.t + o.t_tol < e.t - e.t_tol);
-        match missed {
-            Some((i, o)) => describe(&format!("the tracer misses a closer hit on triangle {i} at t = {}", o.t)),
-            None => Grazing,
+        if hit.prim_id == PRIM_MISS {
+            return match (closest, cands.iter().any(|(_, e)| e.robust(r))) {
+                (None, _) => BothMiss,
+                (Some(_), false) => Grazing,
+                (Some(_), true) => describe("the tracer misses a triangle the ray hits"),
+            };
         }
-    } else {
-        // Closer than the reference's closest: the reported triangle is hit only
-        // within the tolerance (otherwise it would be the reference's answer).
-        Grazing
+        if hit.prim_id >= PRIM_INCOMPLETE {
+            return describe("the tracer returned no valid answer");
+        }
+        let prim = hit.prim_id;
+        if prim as usize >= self.triangle_count {
+            return describe("the tracer's triangle index is out of range");
+        }
+        let Some(&(_, e)) = cands.iter().find(|(i, _)| *i == prim) else {
+            return describe("the tracer reports a triangle the ray does not hit");
+        };
+        let t = hit.t as f64;
+        // Written so that a NaN fails the checks.
+        let t_ok = (t - e.t).abs() <= e.t_tol;
+        if !t_ok {
+            return describe(&format!("the tracer's t differs from the reference's {} (tolerance {})", e.t, e.t_tol));
+        }
+        let uv_ok = (hit.u as f64 - e.u).abs() <= e.bary_tol && (hit.v as f64 - e.v).abs() <= e.bary_tol;
+        if !uv_ok {
+            return describe(&format!(
+                "the tracer's u, v differ from the reference's {}, {} (tolerance {})",
+                e.u, e.v, e.bary_tol
+            ));
+        }
+        let Some((closest_prim, c)) = closest else {
+            // The reported triangle is hit only within the tolerance.
+            return Grazing;
+        };
+        if closest_prim == prim {
+            SamePrim
+        } else if (e.t - c.t).abs() <= e.t_tol + c.t_tol {
+            Tie
+        } else if e.t > c.t {
+            // A farther hit: fine only if every closer hit is marginal.
+            let missed = cands.iter().find(|(_, o)| o.robust(r) && o.t + o.t_tol < e.t - e.t_tol);
+            match missed {
+                Some((i, o)) => describe(&format!("the tracer misses a closer hit on triangle {i} at t = {}", o.t)),
+                None => Grazing,
+            }
+        } else {
+            // Closer than the reference's closest: the reported triangle is hit only
+            // within the tolerance (otherwise it would be the reference's answer).
+            Grazing
+        }
     }
 }
 

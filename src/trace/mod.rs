@@ -376,18 +376,7 @@ impl Tracer {
     ///
     /// Errors: `Error::InvalidInput` when they were compiled for another context.
     pub fn adopt_pipelines(&mut self, pipelines: TracePipelines) -> Result<()> {
-        if !Arc::ptr_eq(&self.ctx, &pipelines.ctx) {
-            return Err(Error::InvalidInput("trace pipelines of another Vulkan context".into()));
-        }
-        for (key, kernels) in pipelines.kernels {
-            if !self.pipelines.kernels.iter().any(|(k, _)| *k == key) {
-                self.pipelines.kernels.push((key, kernels));
-            }
-        }
-        if self.pipelines.order.is_none() {
-            self.pipelines.order = pipelines.order;
-        }
-        Ok(())
+        self.pipelines.merge(pipelines)
     }
 
     /// The pipelines this tracer has compiled so far, shared, not copied: give

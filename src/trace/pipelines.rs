@@ -53,6 +53,29 @@ impl TracePipelines {
         self.kernel(backend, options.traversal, options.counters).map(|_| ())
     }
 
+    /// Adds the pipelines of `other` that this set lacks (shared, not copied):
+    /// e.g. a set kept for a whole program gathers what its tracers compiled
+    /// ([`Tracer::shared_pipelines`](super::Tracer::shared_pipelines)).
+    ///
+    /// Errors: `Error::InvalidInput` when `other` was compiled for another context.
+    pub fn merge(&mut self, other: TracePipelines) -> Result<()> {
+        if !Arc::ptr_eq(&self.ctx, &other.ctx) {
+            return Err(Error::InvalidInput("trace pipelines of another Vulkan context".into()));
+        }
+        for (key, kernels) in other.kernels {
+            if !self.kernels.iter().any(|(k, _)| *k == key) {
+                self.kernels.push((key, kernels));
+            }
+        }
+        if self.order.is_none() {
+            self.order = other.order;
+        }
+        if self.args.is_none() {
+            self.args = other.args;
+        }
+        Ok(())
+    }
+
     /// The arguments kernel of device-counted traces (glsl/indirect_args.comp),
     /// compiled on first use.
     pub(super) fn args_kernel(&mut self) -> Result<Arc<Kernel>> {

@@ -2,12 +2,12 @@
 #![allow(dead_code)]
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::Vec3;
 use kdtrace::gpu::{ContextOptions, GpuContext, Validation};
 use kdtrace::kdtree::KdTree;
-use kdtrace::trace::Tracer;
+use kdtrace::trace::{TraceOptions, TracePipelines, TraceResult, Tracer};
 use kdtrace::Ray;
 
 /// A headless context on the default device (lavapipe here) with the validation
@@ -31,6 +31,43 @@ pub fn validation() -> Validation {
 pub fn try_context(ray_query: bool) -> kdtrace::Result<Arc<GpuContext>> {
     let options = ContextOptions { device: std::env::var("KDTRACE_DEVICE").ok(), validation: validation(), ray_query };
     GpuContext::headless(&options)
+}
+
+/// One context for every test of a test binary that asks for it, with one set
+/// of trace pipelines that their tracers share ([`trace`]): under the
+/// validation layer, creating a trace pipeline costs about 1.8 s on lavapipe
+/// (1.2 s of it the layer re-validating the 1.8 MB kernel with its
+/// specialization constants applied), and the tests of a binary need many of
+/// the same pipelines. The tests of a binary run on parallel threads, so a
+/// validation message is reported by whichever of them checks first
+/// ([`assert_validation_clean`]); the binary fails either way.
+pub fn shared_context() -> Arc<GpuContext> {
+    shared().0.clone()
+}
+
+fn shared() -> &'static (Arc<GpuContext>, Mutex<TracePipelines>) {
+    static SHARED: OnceLock<(Arc<GpuContext>, Mutex<TracePipelines>)> = OnceLock::new();
+    SHARED.get_or_init(|| {
+        let ctx = context();
+        let pipelines = Mutex::new(TracePipelines::new(&ctx));
+        (ctx, pipelines)
+    })
+}
+
+/// `tracer.trace(rays, options)`, sharing pipelines with the other tracers of
+/// [`shared_context`] when the tracer is one of its tracers: it takes those
+/// compiled so far before tracing and gives back those it compiled. Two tests
+/// that need a new pipeline at once both compile it (the first one kept).
+pub fn trace(tracer: &mut Tracer, rays: &[kdtrace::Ray], options: &TraceOptions) -> kdtrace::Result<TraceResult> {
+    let (ctx, pipelines) = shared();
+    if !Arc::ptr_eq(tracer.context(), ctx) {
+        return tracer.trace(rays, options);
+    }
+    let known = pipelines.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    tracer.adopt_pipelines(known)?;
+    let result = tracer.trace(rays, options);
+    pipelines.lock().unwrap_or_else(|p| p.into_inner()).merge(tracer.shared_pipelines())?;
+    result
 }
 
 /// Fails the test when the validation layer reported anything.
