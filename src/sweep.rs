@@ -59,19 +59,30 @@ pub fn subgroup_sizes(tracer: &Tracer) -> Vec<Option<u32>> {
     sizes
 }
 
-/// Runs the sweep over `batches` of (kind, rays).
+/// Errors (`InvalidInput`) naming a variant without packets (backtrack, ropes).
+pub fn check_variants(variants: &[Variant]) -> Result<()> {
+    match variants.iter().find(|v| !PACKET_VARIANTS.contains(v)) {
+        Some(v) => Err(Error::InvalidInput(format!("{} has no packet kernel to sweep", v.name()))),
+        None => Ok(()),
+    }
+}
+
+/// Runs the sweep over `batches` of (kind, rays) and `variants` (those with
+/// packets: [`PACKET_VARIANTS`]).
 pub fn run(
     tracer: &mut Tracer,
     batches: &[(&str, Vec<Ray>)],
+    variants: &[Variant],
     repetitions: usize,
     mut progress: impl FnMut(&str),
 ) -> Result<Vec<SweepRow>> {
+    check_variants(variants)?;
     let mut rows = Vec::new();
     let device_size = tracer.context().info.subgroup_size;
     for size in subgroup_sizes(tracer) {
         let lanes = size.unwrap_or(device_size);
         for (kind, rays) in batches {
-            for variant in PACKET_VARIANTS {
+            for &variant in variants {
                 let mut width = 1;
                 while width <= lanes {
                     let traversal =

@@ -561,6 +561,9 @@ fn subgroups_writes_table_csv_and_chart() {
         "256",
         "--repeat",
         "1",
+        // Two variants (every one is 48 pipelines, 90 s under the validation layer).
+        "--traversal",
+        "stack,short-stack",
         "--csv",
         csv.to_str().unwrap(),
         "--png",
@@ -572,7 +575,12 @@ fn subgroups_writes_table_csv_and_chart() {
     assert!(lines.next().unwrap().starts_with("rays,subgroup_size,traversal,packet_width"));
     let rows: Vec<&str> = lines.collect();
     assert!(rows.iter().any(|r| r.starts_with("camera,")) && rows.iter().any(|r| r.starts_with("random,")), "{text}");
+    assert!(rows.iter().any(|r| r.contains(",short-stack,")), "{text}");
+    assert!(!rows.iter().any(|r| r.contains(",restart,")), "only the variants asked for: {text}");
     assert!(image::open(&png).unwrap().width() > 100);
+    // A variant without packets is refused with a message, before any work.
+    let o = kdtrace(&["subgroups", scene.to_str().unwrap(), "--traversal", "ropes"]);
+    assert!(!o.status.success() && stderr(&o).contains("ropes has no packet kernel"), "{}", stderr(&o));
 }
 
 /// `divergence`: the real kernel, the replay of its control flow, the
