@@ -651,8 +651,10 @@ fn worst(verdicts: impl Iterator<Item = crate::exact::Verdict>) -> crate::exact:
 }
 
 mod gpu;
+mod pipelines;
 pub use crate::abi::GpuInstanceHit;
 pub use gpu::{TwoLevelBinding, TwoLevelTraceResult, TwoLevelTracer};
+pub use pipelines::TwoLevelPipelines;
 
 /// Whether a world-to-object matrix is exactly the identity (its object rays
 /// are the world rays themselves).

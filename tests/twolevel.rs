@@ -686,3 +686,81 @@ fn two_level_traces_report_the_careful_pass() {
     drop((one, two));
     common::assert_validation_clean(&ctx);
 }
+
+/// Pipelines shared between two-level tracers of a context
+/// (`TwoLevelPipelines`): compiled in advance or by another tracer, adopted
+/// without a compile (the very same pipeline bound), tracing as a fresh
+/// tracer does, bit for bit, also after the tracer that compiled them is gone;
+/// a scene of one instance traces right with adopted pipelines (its
+/// one-instance pipelines compiled when bound); another context's are refused.
+#[test]
+fn two_level_tracers_share_pipelines() {
+    use kdtrace::twolevel::TwoLevelPipelines;
+    let ctx = common::context();
+    let config = BuildConfig::default();
+    let geometry = || vec![BottomLevel::new(3, common::sphere(2, 0.2, 4), &config)];
+    let placed = |xs: &[f32]| -> Vec<Instance> {
+        xs.iter()
+            .enumerate()
+            .map(|(i, &x)| Instance {
+                geometry: 0,
+                transform: Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)),
+                instance_id: i as u32,
+                mask: 1,
+            })
+            .collect()
+    };
+    let scene = TwoLevelScene::new(geometry(), &placed(&[0.0, 3.0, 6.0])).unwrap();
+    let other_scene = TwoLevelScene::new(geometry(), &placed(&[1.0, 4.5])).unwrap();
+    let lone_scene = TwoLevelScene::new(geometry(), &placed(&[2.0])).unwrap();
+    let rays = common::random_rays(&mut common::Rng(5), Vec3::new(-1.5, -1.5, -1.5), Vec3::new(7.5, 1.5, 1.5), 400);
+    let stack = Traversal::closest(Variant::Stack);
+    let bits = |hits: &[InstanceHit]| -> Vec<(u32, u32, u32, u32, u32)> {
+        hits.iter().map(|h| (h.t.to_bits(), h.prim_index, h.u.to_bits(), h.v.to_bits(), h.instance_id)).collect()
+    };
+
+    let mut pipelines = TwoLevelPipelines::new(&ctx);
+    pipelines.prepare(stack, false).unwrap();
+    let mut first = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    first.adopt_pipelines(pipelines).unwrap();
+    let mut second = TwoLevelTracer::new(&ctx, &other_scene).unwrap();
+    second.adopt_pipelines(first.shared_pipelines()).unwrap();
+    let usage = ash::vk::BufferUsageFlags::STORAGE_BUFFER;
+    let location = gpu_allocator::MemoryLocation::GpuOnly;
+    let ray_buf = kdtrace::gpu::Buffer::new(&ctx, 32 * 64, usage, location, "rays").unwrap();
+    let hit_buf = kdtrace::gpu::Buffer::new(&ctx, 48 * 64, usage, location, "hits").unwrap();
+    let range = kdtrace::gpu::BufferRange::whole;
+    // SAFETY: whole storage buffers of this device, alive past the bindings.
+    let (a, b) = unsafe {
+        (
+            first.bind(range(&ray_buf), range(&hit_buf), stack).unwrap(),
+            second.bind(range(&ray_buf), range(&hit_buf), stack).unwrap(),
+        )
+    };
+    assert_eq!(first.binding_pipeline(&a), second.binding_pipeline(&b), "the shared pipeline is not compiled again");
+    drop((a, b, ray_buf, hit_buf));
+
+    let mut fresh = TwoLevelTracer::new(&ctx, &scene).unwrap();
+    assert_eq!(bits(&first.trace(&rays, 0xff, stack).unwrap()), bits(&fresh.trace(&rays, 0xff, stack).unwrap()));
+    let lone_shared = first.shared_pipelines();
+    drop(first);
+    let mut other_fresh = TwoLevelTracer::new(&ctx, &other_scene).unwrap();
+    let (shared_hits, fresh_hits) =
+        (second.trace(&rays, 0xff, stack).unwrap(), other_fresh.trace(&rays, 0xff, stack).unwrap());
+    assert_eq!(bits(&shared_hits), bits(&fresh_hits));
+    assert!(shared_hits.iter().any(|h| h.is_hit()), "the rays hit the spheres");
+
+    let mut lone = TwoLevelTracer::new(&ctx, &lone_scene).unwrap();
+    lone.adopt_pipelines(lone_shared).unwrap();
+    let gpu = lone.trace(&rays, 0xff, stack).unwrap();
+    let cpu: Vec<InstanceHit> = rays.iter().map(|r| lone_scene.trace(r, 0xff, stack)).collect();
+    assert_eq!(bits(&gpu), bits(&cpu), "one instance, adopted pipelines: the CPU twin's hits");
+
+    let other = common::context();
+    assert!(!std::sync::Arc::ptr_eq(&ctx, &other), "the test needs two contexts");
+    let err = fresh.adopt_pipelines(TwoLevelPipelines::new(&other)).unwrap_err();
+    assert!(err.to_string().contains("another Vulkan context"), "{err}");
+    drop((second, fresh, other_fresh, lone));
+    common::assert_validation_clean(&ctx);
+    common::assert_validation_clean(&other);
+}

@@ -10,22 +10,19 @@ use ash::vk;
 use bytemuck::Zeroable;
 use gpu_allocator::MemoryLocation;
 
+use super::pipelines::{Passes, TwoLevelPipelines};
 use super::{InstanceHit, TwoLevelScene};
 use crate::abi::{GpuGeometry, GpuInstance, GpuInstanceHit, TopNode, TwoLevelParams};
 use crate::consts::{
     CAREFUL_HEADER_WORDS, INDIRECT_WORDS, MAX_TOP_STACK, TL_BINDINGS, TL_BINDING_CAREFUL, TL_BINDING_GEOMETRIES,
     TL_BINDING_HITS, TL_BINDING_INDIRECT, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
-    TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
-    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
-    TRACE_WORKGROUP_SIZE,
+    TL_BINDING_TRIANGLES,
 };
 use crate::error::{Error, Result};
 use crate::geom::Ray;
-use crate::gpu::{in_order, shaders, Buffer, BufferRange, BufferSet, GpuContext, Kernel, KernelDesc, Timestamps};
-use crate::trace::{
-    buffer_barrier, compile_args_kernel, record_careful_count_copy, record_fast_then_careful, IndirectArgs,
-};
-use crate::traversal::{Traversal, Variant};
+use crate::gpu::{Buffer, BufferRange, BufferSet, GpuContext, Timestamps};
+use crate::trace::{buffer_barrier, record_careful_count_copy, record_fast_then_careful, IndirectArgs};
+use crate::traversal::Traversal;
 
 /// What [`TwoLevelTracer::trace_stats`] returns.
 #[derive(Clone, Debug)]
@@ -72,23 +69,14 @@ pub struct TwoLevelTracer {
     generation: u64,
     /// Pipelines by traversal, compiled on first use: the general one, and while
     /// the scene has one instance those without a top-level loop.
-    kernels: Vec<(Traversal, Passes, Option<Passes>)>,
+    pipelines: TwoLevelPipelines,
     /// The scene has exactly one instance.
     one_instance: bool,
     /// Buffers a recorded update replaced or staged through, each under the
     /// frame value that may still use them ([`TwoLevelTracer::release_retired`]).
     retired: Vec<(u64, Buffer)>,
-    /// The kernel of device-counted traces' arguments, compiled on first use.
-    args_kernel: Option<Arc<Kernel>>,
     /// Bound at `TL_BINDING_INDIRECT` by host-counted bindings (never read).
     dummy: Buffer,
-}
-
-/// The pipelines of one traversal: one pass, or for robust traces a fast pass
-/// and a careful pass over the rays it lists (as `Tracer`'s).
-struct Passes {
-    main: Kernel,
-    careful: Option<Kernel>,
 }
 
 /// The device records of a scene's instances and top level.
@@ -174,10 +162,9 @@ impl TwoLevelTracer {
             capacity,
             top_node_count: 0,
             generation: 0,
-            kernels: Vec::new(),
+            pipelines: TwoLevelPipelines::new(ctx),
             one_instance: false,
             retired: Vec::new(),
-            args_kernel: None,
             dummy: Buffer::new(
                 ctx,
                 u64::from(INDIRECT_WORDS) * 4,
@@ -216,7 +203,7 @@ impl TwoLevelTracer {
         }
         self.top_node_count = records.top.len() as u32;
         self.one_instance = records.instances.len() == 1;
-        self.compile_one_instance()?;
+        self.pipelines.compile_one_instance(self.one_instance)?;
         Ok(())
     }
 
@@ -294,7 +281,7 @@ impl TwoLevelTracer {
         }
         self.top_node_count = records.top.len() as u32;
         self.one_instance = records.instances.len() == 1;
-        self.compile_one_instance()?;
+        self.pipelines.compile_one_instance(self.one_instance)?;
         Ok(())
     }
 
@@ -398,10 +385,10 @@ impl TwoLevelTracer {
     /// recorded updates stay until [`TwoLevelTracer::release_retired`].
     pub fn set_geometries(&mut self, scene: &TwoLevelScene) -> Result<()> {
         let mut fresh = TwoLevelTracer::new(&self.ctx, scene)?;
-        fresh.kernels = std::mem::take(&mut self.kernels);
+        fresh.pipelines = self.pipelines.clone();
         fresh.retired = std::mem::take(&mut self.retired);
         fresh.generation = self.generation + 1;
-        fresh.compile_one_instance()?;
+        fresh.pipelines.compile_one_instance(fresh.one_instance)?;
         *self = fresh;
         Ok(())
     }
@@ -420,7 +407,42 @@ impl TwoLevelTracer {
     /// Errors: `Error::InvalidInput` for a traversal without a two-level kernel
     /// (`backtrack`, `ropes`, packets) or an invalid one.
     pub fn prepare(&mut self, traversal: Traversal) -> Result<()> {
-        self.kernel(traversal).map(|_| ())
+        self.pipelines.kernel(traversal, self.one_instance).map(|_| ())
+    }
+
+    /// The pipelines this tracer has compiled so far, shared, not copied: give
+    /// them to another tracer of the same context
+    /// ([`TwoLevelTracer::adopt_pipelines`]) and it compiles none of them again.
+    pub fn shared_pipelines(&self) -> TwoLevelPipelines {
+        self.pipelines.clone()
+    }
+
+    /// The compute pipeline that recording `binding` now dispatches first (the
+    /// same handle in every tracer that shares its pipelines:
+    /// [`TwoLevelTracer::shared_pipelines`]).
+    pub fn binding_pipeline(&self, binding: &TwoLevelBinding) -> vk::Pipeline {
+        self.passes(binding).main.pipeline
+    }
+
+    /// The passes recording `binding` dispatches: without the top-level loop
+    /// while the scene has one instance and they are compiled.
+    fn passes(&self, binding: &TwoLevelBinding) -> &Passes {
+        let entry = &self.pipelines.kernels[binding.kernel];
+        match &entry.one_instance {
+            Some(one) if self.one_instance => one,
+            _ => &entry.general,
+        }
+    }
+
+    /// Takes over pipelines compiled by another tracer of the same context, or
+    /// in advance ([`TwoLevelPipelines::prepare`]); those it has are kept
+    /// (bindings stay valid). Nothing is compiled here: while the scene has one
+    /// instance, a traversal without its one-instance pipelines traces with the
+    /// general ones until it is prepared or bound again.
+    ///
+    /// Errors: `Error::InvalidInput` when they were compiled for another context.
+    pub fn adopt_pipelines(&mut self, pipelines: TwoLevelPipelines) -> Result<()> {
+        self.pipelines.merge(pipelines)
     }
 
     /// The closest (or, for an any-hit traversal, any) hit of each world ray
@@ -559,7 +581,7 @@ impl TwoLevelTracer {
         if rays.overlaps(&hits) {
             return Err(Error::InvalidInput("the ray and hit ranges overlap".into()));
         }
-        let kernel = self.kernel(traversal)?;
+        let kernel = self.pipelines.kernel(traversal, self.one_instance)?;
         let capacity = (rays.range / RAY_BYTES).min(hits.range / HIT_BYTES).min(u64::from(u32::MAX)) as u32;
         // Robust traces list rays for the careful pass; plain ones bind a list
         // they never touch.
@@ -585,10 +607,7 @@ impl TwoLevelTracer {
         let indirect = match counts {
             None => None,
             Some(source) => {
-                let args_kernel = match &self.args_kernel {
-                    Some(k) => k.clone(),
-                    None => self.args_kernel.insert(Arc::new(compile_args_kernel(&self.ctx)?)).clone(),
-                };
+                let args_kernel = self.pipelines.args_kernel()?;
                 // SAFETY: the caller vouches for `source`.
                 Some(unsafe { IndirectArgs::new(&self.ctx, args_kernel, source)? })
             }
@@ -598,7 +617,7 @@ impl TwoLevelTracer {
             None => &self.dummy,
         });
         // SAFETY: the scene buffers and the list are this tracer's; the caller vouches for the rest.
-        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.kernels[kernel].1.main, &ranges)? };
+        let set = unsafe { BufferSet::from_ranges(&self.ctx, &self.pipelines.kernels[kernel].general.main, &ranges)? };
         Ok(TwoLevelBinding { set, list, hits, kernel, generation: self.generation, capacity, indirect })
     }
 
@@ -692,10 +711,7 @@ impl TwoLevelTracer {
                 indirect: indirect.is_some() as u32,
             };
             let push = bytemuck::bytes_of(&params);
-            let passes = match &self.kernels[binding.kernel] {
-                (_, _, Some(one)) if self.one_instance => one,
-                (_, general, _) => general,
-            };
+            let passes = self.passes(binding);
             let fast_args = indirect.map(|(i, _)| (i.args.buffer, 0));
             // SAFETY: the caller vouches for `cmd` and the lifetimes.
             unsafe {
@@ -723,89 +739,6 @@ impl TwoLevelTracer {
         }
         Ok(())
     }
-
-    /// The index of the pipeline of `traversal`, compiled on first use.
-    fn kernel(&mut self, traversal: Traversal) -> Result<usize> {
-        traversal.validate()?;
-        if matches!(traversal.variant, Variant::Backtrack | Variant::Ropes) || traversal.uses_packets() {
-            return Err(Error::InvalidInput(format!(
-                "{:?}{} has no two-level kernel: the GPU traces stack, restart, push-down and the short stacks with single rays",
-                traversal.variant,
-                if traversal.uses_packets() { " with packets" } else { "" }
-            )));
-        }
-        let key = Traversal {
-            stack_size: if traversal.variant.uses_short_stack() { traversal.stack_size } else { 1 },
-            packet_width: 1,
-            subgroup_size: None,
-            ..traversal
-        };
-        let index = match self.kernels.iter().position(|(k, _, _)| *k == key) {
-            Some(i) => i,
-            None => {
-                let general = compile_passes(&self.ctx, key, false)?;
-                self.kernels.push((key, general, None));
-                self.kernels.len() - 1
-            }
-        };
-        self.compile_one_instance()?;
-        Ok(index)
-    }
-
-    /// When the scene has one instance, the one-instance pipeline of every
-    /// traversal compiled so far (what `record_binding` then dispatches).
-    fn compile_one_instance(&mut self) -> Result<()> {
-        if !self.one_instance {
-            return Ok(());
-        }
-        for entry in self.kernels.iter_mut().filter(|e| e.2.is_none()) {
-            entry.2 = Some(compile_passes(&self.ctx, entry.0, true)?);
-        }
-        Ok(())
-    }
-}
-
-/// The pipelines of `key` (normalized) for a scene of one instance or any: for
-/// robust traces the fast and the careful pass, compiled side by side.
-fn compile_passes(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> Result<Passes> {
-    let (main, careful) = crate::trace::compile_passes(key.robust, |pass| compile(ctx, key, one_instance, pass))?;
-    Ok(Passes { main, careful })
-}
-
-/// The two-level pipeline of `key` (normalized) and `pass`, for a scene of one
-/// instance or any.
-fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool, pass: u32) -> Result<Kernel> {
-    let spec = in_order::<_, { TRACE_SPECS as usize + 1 }>([
-        (TRACE_SPEC_VARIANT, key.variant.id()),
-        (TRACE_SPEC_COUNTERS, 0),
-        (TRACE_SPEC_STACK_SIZE, key.stack_size),
-        (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
-        (TRACE_SPEC_PACKET_WIDTH, 1),
-        (TRACE_SPEC_ROBUST, key.robust as u32),
-        (TRACE_SPEC_PASS, pass),
-        (TL_SPEC_ONE_INSTANCE, one_instance as u32),
-    ]);
-    Kernel::new(
-        ctx,
-        &KernelDesc {
-            name: "trace_twolevel",
-            spirv: shaders::TRACE_TWOLEVEL,
-            bindings: TL_BINDINGS,
-            push_constant_size: std::mem::size_of::<TwoLevelParams>() as u32,
-            spec_constants: &spec,
-            workgroup_size: TRACE_WORKGROUP_SIZE,
-            // Every scene buffer is a texel buffer (see the kernel's bindings).
-            texel_buffers: &[
-                (TL_BINDING_NODES, vk::Format::R32G32_UINT),
-                (TL_BINDING_TRIANGLES, vk::Format::R32G32B32A32_UINT),
-                (TL_BINDING_GEOMETRIES, vk::Format::R32G32B32A32_UINT),
-                (TL_BINDING_INSTANCES, vk::Format::R32G32B32A32_UINT),
-                (TL_BINDING_TOP, vk::Format::R32G32B32A32_UINT),
-                (TL_BINDING_ORDER, vk::Format::R32_UINT),
-            ],
-            ..Default::default()
-        },
-    )
 }
 
 /// Device-local texel buffers for `capacity` instances: instances, top-level
