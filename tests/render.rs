@@ -48,11 +48,16 @@ fn scene_of(triangles: Vec<[Vec3; 3]>, ids: Vec<u32>, materials: Vec<Material>) 
     scene
 }
 
+/// Renders on the binary's shared context, with the trace pipelines that
+/// earlier renders compiled (`common::adopt_shared`): every call used to
+/// compile them again.
 fn render_scene(scene: &Scene, camera: &Camera, settings: &RenderSettings) -> RenderOutput {
-    let ctx = common::context();
+    let ctx = common::shared_context();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    common::adopt_shared(&mut tracer);
     let out = render(&mut tracer, scene, camera, settings, |_, _| {}).unwrap();
+    common::share(&tracer);
     drop(tracer);
     common::assert_validation_clean(&ctx);
     out
@@ -542,9 +547,10 @@ fn a_progressive_checkpoint_is_the_render_of_that_many_samples() {
     // 4-sample render.
     let scene = Scene::load(&common::scene_path("cornell_box.obj")).unwrap();
     let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
-    let ctx = common::context();
+    let ctx = common::shared_context();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    common::adopt_shared(&mut tracer);
     let mut settings = RenderSettings::new(32, 24);
     settings.spp = 8;
     settings.bounces = 1;
@@ -591,9 +597,10 @@ fn direct_light_converges_faster_than_plain_monte_carlo() {
     let (reference, w, h) = kdtrace::render::load_linear(&reference_path).unwrap();
     let scene = Scene::load(&common::scene_path("cornell_box.obj")).unwrap();
     let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "cornell_box").unwrap().unwrap();
-    let ctx = common::context();
+    let ctx = common::shared_context();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    common::adopt_shared(&mut tracer);
     let mut settings = RenderSettings::new(w, h);
     settings.bounces = 0;
     settings.seed = 1;
@@ -640,9 +647,10 @@ fn saved_rays_are_the_rays_the_render_traced() {
     settings.bounces = 2;
     settings.keep_first_hits = true;
     settings.save_rays = Some(dir.clone());
-    let ctx = common::context();
+    let ctx = common::shared_context();
     let tree = KdTree::build(&scene.triangles, &BuildConfig::default());
     let mut tracer = Tracer::new(&ctx, &tree, &scene.triangles).unwrap();
+    common::adopt_shared(&mut tracer);
     let out = render(&mut tracer, &scene, &camera, &settings, |_, _| {}).unwrap();
     let read = |name: &str| kdtrace::io::read_rays(&dir.join(format!("{name}.rays"))).unwrap();
     let count = |prefix: &str| {

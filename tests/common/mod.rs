@@ -40,7 +40,9 @@ pub fn try_context(ray_query: bool) -> kdtrace::Result<Arc<GpuContext>> {
 /// specialization constants applied), and the tests of a binary need many of
 /// the same pipelines. The tests of a binary run on parallel threads, so a
 /// validation message is reported by whichever of them checks first
-/// ([`assert_validation_clean`]); the binary fails either way.
+/// ([`assert_validation_clean`]); the binary fails either way. So it is not
+/// for binaries with a test that provokes a validation message on purpose
+/// (embed, gpu_context): another test would take it.
 pub fn shared_context() -> Arc<GpuContext> {
     shared().0.clone()
 }
@@ -54,19 +56,34 @@ fn shared() -> &'static (Arc<GpuContext>, Mutex<TracePipelines>) {
     })
 }
 
-/// `tracer.trace(rays, options)`, sharing pipelines with the other tracers of
-/// [`shared_context`] when the tracer is one of its tracers: it takes those
-/// compiled so far before tracing and gives back those it compiled. Two tests
-/// that need a new pipeline at once both compile it (the first one kept).
-pub fn trace(tracer: &mut Tracer, rays: &[kdtrace::Ray], options: &TraceOptions) -> kdtrace::Result<TraceResult> {
+/// Gives `tracer` the trace pipelines compiled so far by the tracers of
+/// [`shared_context`] (nothing for a tracer of another context).
+pub fn adopt_shared(tracer: &mut Tracer) {
     let (ctx, pipelines) = shared();
-    if !Arc::ptr_eq(tracer.context(), ctx) {
-        return tracer.trace(rays, options);
+    if Arc::ptr_eq(tracer.context(), ctx) {
+        let known = pipelines.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        tracer.adopt_pipelines(known).expect("pipelines of the tracer's own context");
     }
-    let known = pipelines.lock().unwrap_or_else(|p| p.into_inner()).clone();
-    tracer.adopt_pipelines(known)?;
+}
+
+/// Adds the trace pipelines `tracer` compiled to those of [`shared_context`]
+/// (nothing for a tracer of another context).
+pub fn share(tracer: &Tracer) {
+    let (ctx, pipelines) = shared();
+    if Arc::ptr_eq(tracer.context(), ctx) {
+        let mut shared = pipelines.lock().unwrap_or_else(|p| p.into_inner());
+        shared.merge(tracer.shared_pipelines()).expect("pipelines of the shared context");
+    }
+}
+
+/// `tracer.trace(rays, options)`, sharing pipelines with the other tracers of
+/// [`shared_context`] when the tracer is one of its tracers ([`adopt_shared`]
+/// before, [`share`] after). Two tests that need a new pipeline at once both
+/// compile it (the first one kept).
+pub fn trace(tracer: &mut Tracer, rays: &[kdtrace::Ray], options: &TraceOptions) -> kdtrace::Result<TraceResult> {
+    adopt_shared(tracer);
     let result = tracer.trace(rays, options);
-    pipelines.lock().unwrap_or_else(|p| p.into_inner()).merge(tracer.shared_pipelines())?;
+    share(tracer);
     result
 }
 
