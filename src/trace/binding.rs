@@ -141,8 +141,6 @@ pub(crate) struct IndirectArgs {
     pub(super) source: BufferRange,
 }
 
-/// The kernel that turns a caller's count into a binding's arguments
-/// (glsl/indirect_args.comp).
 /// Records the copy of a careful list's count (word `CAREFUL_COUNT`) into the
 /// first word of `dst`, after the passes that wrote it (a barrier first).
 ///
@@ -172,7 +170,18 @@ pub(crate) unsafe fn record_careful_count_copy(
     }
 }
 
-pub(crate) fn compile_args_kernel(ctx: &Arc<GpuContext>) -> Result<Kernel> {
+/// The arguments kernel kept in `slot`, compiled there on first use (the
+/// trace and two-level pipeline sets each keep one).
+pub(crate) fn cached_args_kernel(ctx: &Arc<GpuContext>, slot: &mut Option<Arc<Kernel>>) -> Result<Arc<Kernel>> {
+    if let Some(k) = slot {
+        return Ok(k.clone());
+    }
+    Ok(slot.insert(Arc::new(compile_args_kernel(ctx)?)).clone())
+}
+
+/// The kernel that turns a caller's count into a binding's arguments
+/// (glsl/indirect_args.comp).
+fn compile_args_kernel(ctx: &Arc<GpuContext>) -> Result<Kernel> {
     Kernel::new(
         ctx,
         &KernelDesc {

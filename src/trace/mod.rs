@@ -143,7 +143,7 @@ pub(crate) mod scene;
 
 pub use binding::TraceBinding;
 pub(crate) use binding::{
-    buffer_barrier, compile_args_kernel, record_careful_count_copy, record_fast_then_careful, IndirectArgs,
+    buffer_barrier, cached_args_kernel, record_careful_count_copy, record_fast_then_careful, IndirectArgs,
 };
 pub use options::{incomplete_rays, Backend, RayOrder, TraceOptions, TraceResult};
 use options::{COUNTER_BYTES, DEFAULT_CHUNK, HIT_BYTES, RAY_BYTES, WORD_BYTES};

@@ -79,12 +79,7 @@ impl TracePipelines {
     /// The arguments kernel of device-counted traces (glsl/indirect_args.comp),
     /// compiled on first use.
     pub(super) fn args_kernel(&mut self) -> Result<Arc<Kernel>> {
-        if let Some(k) = &self.args {
-            return Ok(k.clone());
-        }
-        let kernel = Arc::new(super::binding::compile_args_kernel(&self.ctx)?);
-        self.args = Some(kernel.clone());
-        Ok(kernel)
+        super::binding::cached_args_kernel(&self.ctx, &mut self.args)
     }
 
     /// The ordering kernel's steps (count, scan, scatter), compiled on first use.

@@ -436,9 +436,9 @@ impl TwoLevelTracer {
 
     /// Takes over pipelines compiled by another tracer of the same context, or
     /// in advance ([`TwoLevelPipelines::prepare`]); those it has are kept
-    /// (bindings stay valid). Nothing is compiled here: while the scene has one
-    /// instance, a traversal without its one-instance pipelines traces with the
-    /// general ones until it is prepared or bound again.
+    /// (bindings stay valid). Nothing is compiled here; while the scene has one
+    /// instance, binding or preparing a traversal compiles its one-instance
+    /// pipelines if the adopted set lacks them.
     ///
     /// Errors: `Error::InvalidInput` when they were compiled for another context.
     pub fn adopt_pipelines(&mut self, pipelines: TwoLevelPipelines) -> Result<()> {

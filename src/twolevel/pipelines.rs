@@ -13,7 +13,7 @@ use crate::consts::{
 };
 use crate::error::{Error, Result};
 use crate::gpu::{in_order, shaders, GpuContext, Kernel, KernelDesc};
-use crate::trace::compile_args_kernel;
+use crate::trace::cached_args_kernel;
 use crate::traversal::{Traversal, Variant};
 
 /// Compiled two-level pipelines of one context, independent of any scene: one
@@ -133,10 +133,7 @@ impl TwoLevelPipelines {
 
     /// The arguments kernel of device-counted traces, compiled on first use.
     pub(super) fn args_kernel(&mut self) -> Result<Arc<Kernel>> {
-        if let Some(k) = &self.args {
-            return Ok(k.clone());
-        }
-        Ok(self.args.insert(Arc::new(compile_args_kernel(&self.ctx)?)).clone())
+        cached_args_kernel(&self.ctx, &mut self.args)
     }
 }
 
