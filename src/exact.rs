@@ -534,6 +534,68 @@ pub fn judge_any(triangles: &[[Vec3; 3]], ray: &Ray, hit: &Hit, exact: &Exact) -
 mod tests {
     use super::*;
 
+    /// The exact triangle test's edge signs near an edge (`geom::edge_sign`, twin
+    /// of `edge_sign_exact` in triangle.glsl) are the exact triple product's,
+    /// except within 2^-100 of the vectors' magnitudes, where they may say 0 (on
+    /// the edge); reversing the edge negates them exactly. Origins exactly on an
+    /// edge's line and 1e-17, 1e-25 or 3e-35 (relative) off it: spokes of a fan
+    /// (`cos`/`sin` values, cos(π/2) = 6.1e-17 beside 1) and lines through small
+    /// integer points, at scales 2^-60..2^60, axes permuted.
+    #[test]
+    fn edge_signs_are_exact_outside_2_pow_minus_100() {
+        use crate::geom::edge_sign;
+        use crate::raygen::SplitMix64;
+        let mut rng = SplitMix64(5);
+        let (mut hard, mut zero_exact, mut decided) = (0, 0, 0);
+        for i in 0..20_000 {
+            let scale = 2f32.powi(rng.below(121) as i32 - 60);
+            let off = [0.0, 1e-17, -1e-25, 3e-35][rng.below(4)] * scale;
+            let k = 2f32.powi(-(rng.below(10) as i32 + 1));
+            let (p, q, o) = if i % 2 == 0 {
+                let a = rng.below(64) as f64 * std::f64::consts::TAU / 64.0;
+                let q = Vec3::new(a.cos() as f32, a.sin() as f32, 0.0) * scale;
+                let on = |c: f32| if c.abs() < 1e-10 * scale { 0.0 } else { c * k };
+                (Vec3::ZERO, q, Vec3::new(on(q.x), on(q.y), off))
+            } else {
+                let mut int = || (rng.below(17) as f32 - 8.0) * scale;
+                let (p, q) = (Vec3::new(int(), int(), 0.0), Vec3::new(int(), int(), 0.0));
+                (p, q, Vec3::new(p.x + (q.x - p.x) * k, p.y + (q.y - p.y) * k, off))
+            };
+            let turn = rng.below(3);
+            let [p, q, o] = [p, q, o].map(|v| Vec3::from_array([v[turn], v[(turn + 1) % 3], v[(turn + 2) % 3]]));
+            let mut d = rng.unit_vector();
+            if i % 5 == 0 {
+                d[rng.below(3)] = 0.0;
+            }
+            let (dd, pp, qq) = (fixed3(d), sub3(&fixed3(p), &fixed3(o)), sub3(&fixed3(q), &fixed3(o)));
+            let exact = triple_exact(&dd, &pp, &qq);
+            let exact_sign = if exact.is_zero() {
+                0
+            } else if exact.is_positive() {
+                1
+            } else {
+                -1
+            };
+            let sign = edge_sign(p, q, o, d);
+            assert_eq!(edge_sign(q, p, o, d), -sign, "reversed edge {p} {q} {o} {d}");
+            // |det| relative to the max norms of p - o, q - o and d (each scaled by 2^149).
+            let norm = |v: Vec3| (v.abs().max_element() as f64).max(f64::MIN_POSITIVE);
+            let relative = exact.to_f64().unwrap().abs() * 2f64.powi(-447) / (norm(p - o) * norm(q - o) * norm(d));
+            hard += usize::from(relative < 2f64.powi(-40));
+            zero_exact += usize::from(exact_sign == 0);
+            decided += usize::from(exact_sign != 0 && relative < 2f64.powi(-40) && sign == exact_sign);
+            if sign != exact_sign {
+                assert!(
+                    sign == 0 && relative <= 2f64.powi(-99),
+                    "{p} {q} {o} {d}: {sign} vs exact {exact_sign} ({relative:e})"
+                );
+            }
+        }
+        // Inside the float-float band (what the exact orientation is for): some exactly on
+        // the line, many off it and decided.
+        assert!(hard > 10_000 && zero_exact > 1_000 && decided > 5_000, "{hard} {zero_exact} {decided}");
+    }
+
     /// Two triangles sharing the diagonal (0,0,0)-(1,1,0) of the unit square in
     /// z = 0, and one more at z = 1 covering the same square.
     pub(super) fn quad() -> Vec<[Vec3; 3]> {

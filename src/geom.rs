@@ -1,7 +1,7 @@
 //! Geometry shared by the builder, the CPU traversals and the GPU layouts:
 //! boxes, rays, hits and the watertight ray/triangle test.
 
-use crate::ff::{exact_sum8, two_prod, Ff};
+use crate::ff::{exact_sum8, orient_sign, two_prod, Ff};
 use glam::Vec3;
 
 pub use crate::abi::{Hit, Ray};
@@ -168,11 +168,16 @@ pub struct WatertightRay {
 /// terms: `2^-EDGE_GAMMA_LOG2` ([`crate::consts::EDGE_GAMMA_LOG2`]).
 pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f32;
 
-/// An exact-test edge function within `ON_EDGE_GAMMA` times the magnitude of
-/// its two products counts as 0 (the ray through the edge): 2^-40, 16× the
-/// float-float error of the 2D coordinates (one rounding each) carried
-/// through the products. Twin of `ON_EDGE_GAMMA` in triangle.glsl.
+/// Within `ON_EDGE_GAMMA` times the magnitude of its two products, an exact-test
+/// edge function's float-float sign may be wrong (2^-40, 16× the float-float
+/// error of the 2D coordinates, one rounding each, carried through the
+/// products): there [`edge_sign`] decides. Twin of `ON_EDGE_GAMMA` in triangle.glsl.
 const ON_EDGE_GAMMA: f32 = 1.0 / 1_099_511_627_776.0;
+
+/// The magnitude an in-band edge function takes when [`edge_sign`] corrects its
+/// sign (2^-100: its barycentric weight is 0 to f32 precision). Twin of
+/// `ORIENT_TINY` in triangle.glsl.
+const ORIENT_TINY: f32 = 7.888_609e-31;
 
 /// The exponent `e` of `x = m·2^e`, `m` in `[1, 2)` (0 for `x = 0`). Twin of
 /// `exponent_of` in triangle.glsl.
@@ -189,6 +194,31 @@ pub(crate) fn exponent_of(x: f32) -> i32 {
 #[inline]
 fn pow2(k: i32) -> f32 {
     f32::from_bits(((k.clamp(-126, 127) + 127) as u32) << 23)
+}
+
+/// The sign of the edge function of the edge `p → q` for the ray from `o` along
+/// `dir`: of `det[p - o, q - o, dir]`, exact unless within 2^-100 of the three
+/// vectors' magnitudes (then 0, on the edge). The pair is taken in a fixed order
+/// (lexicographic) and the sign negated when swapped, so `edge_sign(q, p, ..)`
+/// is exactly `-edge_sign(p, q, ..)`: the triangles sharing an edge agree on
+/// which side the ray passes. Twin of `edge_sign_exact` in triangle.glsl.
+pub(crate) fn edge_sign(p: Vec3, q: Vec3, o: Vec3, dir: Vec3) -> i32 {
+    let swap = p.x > q.x || (p.x == q.x && (p.y > q.y || (p.y == q.y && p.z > q.z)));
+    let (f, g) = if swap { (q, p) } else { (p, q) };
+    let unit = |v: [Ff; 3]| {
+        let e = exponent_of(v[0].hi.abs().max(v[1].hi.abs()).max(v[2].hi.abs()));
+        v.map(|x| ff_ldexp(x, -e))
+    };
+    let x = unit([0, 1, 2].map(|i| Ff::diff(f[i], o[i])));
+    let y = unit([0, 1, 2].map(|i| Ff::diff(g[i], o[i])));
+    let ed = exponent_of(dir.x.abs().max(dir.y.abs()).max(dir.z.abs()));
+    let d = [0, 1, 2].map(|i| ldexp2(dir[i], -ed));
+    let s = orient_sign(x, y, d);
+    if swap {
+        -s
+    } else {
+        s
+    }
 }
 
 /// The sheared coordinate `(v - o)·dz - s·(v_z - o_z)` from offsets scaled by
@@ -486,20 +516,25 @@ impl WatertightRay {
         let u = cx.mul(by).sub(cy.mul(bx));
         let v = ax.mul(cy).sub(ay.mul(cx));
         let w = bx.mul(ay).sub(by.mul(ax));
-        // Within the coordinates' rounding of 0 (the ray through the edge: at a fold,
-        // a box corner or a mesh's border, rounding could put it outside both
-        // triangles): on the edge, a hit. See triangle.glsl.
-        let on_edge = |e: Ff, p: Ff, q: Ff, r: Ff, s: Ff| {
+        // Within the coordinates' rounding of 0 the exact sign decides (edge_sign:
+        // 0 for a ray through the edge, a hit); see triangle.glsl. Edge k runs
+        // from vertex k+2 to vertex k+1 (u: v2 -> v1, v: v0 -> v2, w: v1 -> v0).
+        let in_band = |e: Ff, p: Ff, q: Ff, r: Ff, s: Ff| {
             let m = (p.hi * q.hi).abs() + (r.hi * s.hi).abs();
-            if e.hi.abs() <= m * ON_EDGE_GAMMA {
-                Ff { hi: 0.0, lo: 0.0 }
-            } else {
-                e
-            }
+            e.hi.abs() <= m * ON_EDGE_GAMMA
         };
-        let u = on_edge(u, cx, by, cy, bx);
-        let v = on_edge(v, ax, cy, ay, cx);
-        let w = on_edge(w, bx, ay, by, ax);
+        let band = [in_band(u, cx, by, cy, bx), in_band(v, ax, cy, ay, cx), in_band(w, bx, ay, by, ax)];
+        let vs = [v0, v1, v2];
+        let mut uvw = [u, v, w];
+        for k in 0..3 {
+            if band[k] {
+                let s = edge_sign(vs[(k + 2) % 3], vs[(k + 1) % 3], self.origin, self.dir);
+                let e = uvw[k];
+                let agrees = (s > 0 && e.hi > 0.0) || (s < 0 && e.hi < 0.0);
+                uvw[k] = if agrees { e } else { Ff { hi: s as f32 * ORIENT_TINY, lo: 0.0 } };
+            }
+        }
+        let [u, v, w] = uvw;
         if (u.hi < 0.0 || v.hi < 0.0 || w.hi < 0.0) && (u.hi > 0.0 || v.hi > 0.0 || w.hi > 0.0) {
             return None;
         }

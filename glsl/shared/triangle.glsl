@@ -13,9 +13,11 @@
 // lies within its bound, the whole test is redone exactly on the f32 inputs
 // (intersect_triangle_exact: each sheared coordinate an exact expansion rounded
 // once to 48 bits), whose signs are those of the exact edge functions unless the
-// ray passes within about 2^-46 of the edge. Watertightness is kept: a shared edge's f32 sign outside its
-// bound is the exact sign, both forms negate exactly when the edge is reversed,
-// and the exact form is a 2D orientation test of shared 2D vertices.
+// ray passes within about 2^-46 of the edge; within 2^-40 the sign comes from an
+// exact orientation (edge_sign_exact: det[v_i - o, v_j - o, d] as an exact
+// expansion), exact unless the ray passes within 2^-100 of the edge. Watertightness
+// is kept: a shared edge's f32 sign outside its bound is the exact sign, and
+// every form negates exactly when the edge is reversed.
 #ifndef TRIANGLE_GLSL
 #define TRIANGLE_GLSL
 
@@ -128,12 +130,43 @@ vec2 sheared_exact(float v, float v_z, float o, float o_z, float dz, float s, in
 // rounding each) carried through an edge function's two products.
 const float ON_EDGE_GAMMA = 1.0 / 1099511627776.0;
 
-// The edge function e = p q - r s, or 0 within ON_EDGE_GAMMA of its products'
-// magnitude (twin of on_edge in WatertightRay::intersect_exact).
-vec2 on_edge(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
+// Whether the edge function e = p q - r s lies within ON_EDGE_GAMMA of its
+// products' magnitude, where its float-float sign may be wrong (twin of in_band
+// in WatertightRay::intersect_exact).
+bool on_edge_band(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
     precise float m = abs(p.x * q.x) + abs(r.x * s.x);
     precise float bound = m * ON_EDGE_GAMMA;
-    return abs(e.x) <= bound ? vec2(0.0) : e;
+    return abs(e.x) <= bound;
+}
+
+// The magnitude an in-band edge function takes when edge_sign_exact corrects
+// its sign (2^-100: its barycentric weight is 0 to f32 precision).
+const float ORIENT_TINY = 7.888609052210118e-31;
+
+// The sign of the edge function of the edge p -> q for the ray from o along
+// dir: of det[p - o, q - o, dir], exact unless within 2^-100 of the three
+// vectors' magnitudes (then 0: on the edge). The pair is taken in a fixed
+// (lexicographic) order and the sign negated when swapped, so the triangles
+// sharing an edge see exactly opposite signs. Twin: edge_sign in src/geom.rs.
+int edge_sign_exact(vec3 p, vec3 q, vec3 o, vec3 dir) {
+    bool swap = p.x > q.x || (p.x == q.x && (p.y > q.y || (p.y == q.y && p.z > q.z)));
+    vec3 f = swap ? q : p;
+    vec3 g = swap ? p : q;
+    vec2 x[3], y[3];
+    for (uint i = 0u; i < 3u; ++i) {
+        x[i] = ff_diff(f[i], o[i]);
+        y[i] = ff_diff(g[i], o[i]);
+    }
+    int ex = exponent_of(max(max(abs(x[0].x), abs(x[1].x)), abs(x[2].x)));
+    int ey = exponent_of(max(max(abs(y[0].x), abs(y[1].x)), abs(y[2].x)));
+    int ed = exponent_of(max(max(abs(dir.x), abs(dir.y)), abs(dir.z)));
+    for (uint i = 0u; i < 3u; ++i) {
+        x[i] = ff_ldexp(x[i], -ex);
+        y[i] = ff_ldexp(y[i], -ey);
+    }
+    precise vec3 d = vec3(ldexp2(dir.x, -ed), ldexp2(dir.y, -ed), ldexp2(dir.z, -ed));
+    int s = ff_orient_sign(x, y, d);
+    return swap ? -s : s;
 }
 
 // The test in float-float (ff.glsl) on the f32 inputs, for rays near an edge, a
@@ -147,8 +180,10 @@ vec2 on_edge(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
 // antisymmetric with signs exact unless the ray passes within about 2^-44 of the
 // edge (relative to the coordinates), so the triangles around an edge or vertex
 // tile the plane: a ray through a vertex hits one of them, never none. Within
-// 2^-40 an edge function counts as 0 (on_edge): a ray through an edge where two
-// triangles fold hits them rather than slipping between.
+// 2^-40 an edge function takes the sign of the exact orientation
+// (edge_sign_exact), 0 within 2^-100: a ray through an edge where two triangles
+// fold hits them rather than slipping between, and a ray 2^-60 beside a spoke
+// of a fan hits the one triangle it passes through, not both.
 //
 // The hit's t lies in [tmin, r.ray_tmax] (in float-float, in the ray's own
 // parameter: t - t_shift + t_shift). Answers in the segment frame: t_out and
@@ -213,13 +248,28 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
     vec2 u = ff_sub(ff_mul(cx, by), ff_mul(cy, bx));
     vec2 v = ff_sub(ff_mul(ax, cy), ff_mul(ay, cx));
     vec2 w = ff_sub(ff_mul(bx, ay), ff_mul(by, ax));
-    // An edge function within the coordinates' rounding of 0 is 0: the ray
-    // passes through the edge, a hit. (Where two triangles fold, at a box
-    // corner or a mesh's border, their projections lie on one side of the edge
-    // and a rounding could put the ray outside both.)
-    u = on_edge(u, cx, by, cy, bx);
-    v = on_edge(v, ax, cy, ay, cx);
-    w = on_edge(w, bx, ay, by, ax);
+    // An edge function within the coordinates' rounding of 0 takes the exact
+    // sign (edge_sign_exact), 0 for a ray through the edge: a hit. (Where two
+    // triangles fold, at a box corner or a mesh's border, their projections lie
+    // on one side of the edge, and a rounded sign could put the ray outside
+    // both, or inside both where they tile.) Edge k runs from vertex k+2 to
+    // vertex k+1 (u: v2 -> v1, v: v0 -> v2, w: v1 -> v0); one call site.
+    bool band[3] = bool[3](on_edge_band(u, cx, by, cy, bx), on_edge_band(v, ax, cy, ay, cx),
+                           on_edge_band(w, bx, ay, by, ax));
+    if (band[0] || band[1] || band[2]) {
+        vec3 vs[3] = vec3[3](v0, v1, v2);
+        vec2 uvw[3] = vec2[3](u, v, w);
+        for (uint k = 0u; k < 3u; ++k) {
+            if (!band[k]) continue;
+            int s = edge_sign_exact(vs[(k + 2u) % 3u], vs[(k + 1u) % 3u], r.origin, r.dir);
+            vec2 e = uvw[k];
+            bool agrees = (s > 0 && e.x > 0.0) || (s < 0 && e.x < 0.0);
+            uvw[k] = agrees ? e : vec2(float(s) * ORIENT_TINY, 0.0);
+        }
+        u = uvw[0];
+        v = uvw[1];
+        w = uvw[2];
+    }
     if ((u.x < 0.0 || v.x < 0.0 || w.x < 0.0) && (u.x > 0.0 || v.x > 0.0 || w.x > 0.0)) return false;
     vec2 det = ff_add(ff_add(u, v), w);
     if (det.x == 0.0) return false;
