@@ -416,8 +416,10 @@ impl WatertightRay {
             if negative && positive {
                 return TriTest::Miss;
             }
-            // Any sign in doubt: decide exactly.
-            if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) {
+            // Any sign in doubt, or a bound below the smallest normal f32 (coordinates
+            // under about 1e-16 of the ray's scale: the bound lost its meaning, and a GPU
+            // flushes it to 0): decide exactly.
+            if !(u.abs() > eu && v.abs() > ev && w.abs() > ew) || bound < f32::MIN_POSITIVE {
                 return TriTest::Unsure;
             }
         }
@@ -425,22 +427,30 @@ impl WatertightRay {
         if det == 0.0 {
             return TriTest::Miss;
         }
+        if self.robust && !det.is_finite() {
+            // The edge functions overflowed (coordinates above about 1e19 of the ray's
+            // scale): the exact test scales them.
+            return TriTest::Unsure;
+        }
         let az = self.sz * a[kz];
         let bz = self.sz * b[kz];
         let cz = self.sz * c[kz];
-        let t_scaled = u * az + v * bz + w * cz;
+        // t = Σ u_i z_i / Σ u_i as the barycentric weights' sum of the z_i: no
+        // product of three coordinates, which under- or overflows f32 for scenes
+        // whose coordinates are below about 1e-13 or above 1e12.
         let rcp_det = 1.0 / det;
-        let t = t_scaled * rcp_det;
+        let (b0, b1, b2) = (u * rcp_det, v * rcp_det, w * rcp_det);
+        let t = (b0 * az + b1 * bz) + b2 * cz;
         let mut e = 0.0;
         if self.robust {
-            // A bound on |t − exact t|: the edge functions' errors δu_i move t_scaled −
-            // t·det by Σ δu_i (z_i − t), and |z_i − t| is at most the spread of the z_i;
-            // then the roundings of t_scaled, det and t.
-            let ez = (u.abs() + v.abs() + w.abs()) * (self.sz * self.seg_err[kz]).abs();
-            let t_err = EDGE_GAMMA * (((u * az).abs() + (v * bz).abs() + (w * cz).abs()) + ez);
-            let weights_err = eu + ev + ew;
+            // A bound on |t − exact t|: the edge functions' errors δu_i move t by
+            // Σ δu_i (z_i − t) / det, and |z_i − t| is at most the spread of the z_i;
+            // then the roundings of the weights (det's included) and of the sum.
+            let ez = (b0.abs() + b1.abs() + b2.abs()) * (self.sz * self.seg_err[kz]).abs();
+            let terms = (b0 * az).abs() + (b1 * bz).abs() + (b2 * cz).abs();
+            let weights_err = (eu + ev + ew) * rcp_det.abs();
             let spread = az.max(bz).max(cz) - az.min(bz).min(cz);
-            e = (t_err + weights_err * spread + EDGE_GAMMA * t_scaled.abs()) / det.abs() + EDGE_GAMMA * t.abs();
+            e = EDGE_GAMMA * ((2.0 * terms + ez) + t.abs()) + weights_err * spread;
             // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
             // surface, a shadow ray ending on a vertex): decide exactly which side of the
             // bound it lies on (see triangle.glsl).
@@ -454,7 +464,7 @@ impl WatertightRay {
         if !(t >= tmin && below) {
             return TriTest::Miss;
         }
-        TriTest::Hit(t, v * rcp_det, w * rcp_det, e)
+        TriTest::Hit(t, b1, b2, e)
     }
 
     /// The test in float-float ([`crate::ff`]) on the f32 inputs, for rays near

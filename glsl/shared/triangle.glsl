@@ -68,6 +68,10 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
     return r;
 }
 
+// The smallest normal and the largest finite f32.
+const float TRI_FLT_MIN = 1.17549435e-38;
+const float TRI_FLT_MAX = 3.40282347e38;
+
 // The error bound of an f32 edge function relative to its terms' magnitude
 // (EDGE_GAMMA_LOG2 from src/consts.rs).
 const float EDGE_GAMMA = 1.0 / float(1u << EDGE_GAMMA_LOG2);
@@ -419,27 +423,38 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         bool negative = u < -eu || v < -ev || w < -ew;
         bool positive = u > eu || v > ev || w > ew;
         if (negative && positive) return TRI_MISS;
-        // Any sign in doubt: decide exactly.
-        if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew)) return TRI_UNSURE;
+        // Any sign in doubt, or a bound below the smallest normal f32 (coordinates
+        // under about 1e-16 of the ray's scale: the bound lost its meaning, and a GPU
+        // flushes it to 0): decide exactly.
+        if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew) || bound < TRI_FLT_MIN) return TRI_UNSURE;
     }
     precise float det = u + v + w;
     if (det == 0.0) return TRI_MISS;
+    // The edge functions overflowed (coordinates above about 1e19 of the ray's
+    // scale): the exact test scales them.
+    if (ROBUST && !(abs(det) <= TRI_FLT_MAX)) return TRI_UNSURE;
     precise float az = r.sz * a[r.kz];
     precise float bz = r.sz * b[r.kz];
     precise float cz = r.sz * c[r.kz];
-    precise float t_scaled = u * az + v * bz + w * cz;
+    // t = sum(u_i z_i) / sum(u_i) as the barycentric weights' sum of the z_i: no
+    // product of three coordinates, which under- or overflows f32 for scenes
+    // whose coordinates are below about 1e-13 or above 1e12.
     precise float rcp_det = 1.0 / det;
-    precise float t = t_scaled * rcp_det;
+    precise float b0 = u * rcp_det;
+    precise float b1 = v * rcp_det;
+    precise float b2 = w * rcp_det;
+    precise float t = (b0 * az + b1 * bz) + b2 * cz;
     precise float e = 0.0;
     if (ROBUST) {
-        // A bound on |t - exact t|: the edge functions' errors du_i move t_scaled -
-        // t det by sum du_i (z_i - t), and |z_i - t| is at most the spread of the z_i
-        // (t is their weighted mean); then the roundings of t_scaled, det and t.
-        precise float ez = SEGMENT_FRAME ? (abs(u) + abs(v) + abs(w)) * abs(r.sz * r.seg_err[r.kz]) : 0.0;
-        precise float t_err = EDGE_GAMMA * ((abs(u * az) + abs(v * bz) + abs(w * cz)) + ez);
-        precise float weights_err = eu + ev + ew;
+        // A bound on |t - exact t|: the edge functions' errors du_i move t by
+        // sum du_i (z_i - t) / det, and |z_i - t| is at most the spread of the z_i
+        // (t is their weighted mean); then the roundings of the weights (det's
+        // included) and of the sum.
+        precise float ez = SEGMENT_FRAME ? (abs(b0) + abs(b1) + abs(b2)) * abs(r.sz * r.seg_err[r.kz]) : 0.0;
+        precise float terms = abs(b0 * az) + abs(b1 * bz) + abs(b2 * cz);
+        precise float weights_err = (eu + ev + ew) * abs(rcp_det);
         precise float spread = max(max(az, bz), cz) - min(min(az, bz), cz);
-        e = (t_err + weights_err * spread + EDGE_GAMMA * abs(t_scaled)) / abs(det) + EDGE_GAMMA * abs(t);
+        e = EDGE_GAMMA * ((2.0 * terms + ez) + abs(t)) + weights_err * spread;
         // A hit within that bound of tmin or of the ray's own tmax (a ray leaving a
         // surface, a shadow ray ending on a vertex): decide exactly which side of the
         // bound it lies on. |t - b| is exact near b (Sterbenz) and far from it it
@@ -453,10 +468,8 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
     if (!(t >= tmin && below)) return TRI_MISS;
     t_out = t;
     e_out = e;
-    precise float bu = v * rcp_det;
-    precise float bv = w * rcp_det;
-    u_out = bu;
-    v_out = bv;
+    u_out = b1;
+    v_out = b2;
     return TRI_HIT;
 }
 
