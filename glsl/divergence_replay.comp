@@ -21,6 +21,7 @@
 // loops and no fetches: the records' own read cost.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "kdnode.glsl"
 

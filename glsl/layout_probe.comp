@@ -7,6 +7,7 @@
 // so the stride counts too; the kd-tree nodes are decoded by kdnode.glsl.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "ray.glsl"
 #include "raster.glsl"

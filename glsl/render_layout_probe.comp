@@ -7,6 +7,7 @@
 // prove the Rust structs agree with the shaders' view field by field.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "ray.glsl"
 #include "render.glsl"

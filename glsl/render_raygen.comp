@@ -6,6 +6,7 @@
 // See src/render/wavefront.rs.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "ray.glsl"
 #include "render.glsl"

@@ -5,6 +5,7 @@
 // invocations write the same pixel. See src/render/wavefront.rs.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "ray.glsl"
 #include "render.glsl"

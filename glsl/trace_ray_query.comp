@@ -13,6 +13,7 @@
 // traced from where it enters the scene box instead.
 
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #extension GL_EXT_ray_query : require
 
 #include "ray.glsl"

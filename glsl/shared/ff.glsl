@@ -127,21 +127,22 @@ vec2 ff_exact_sum8(float terms[8]) {
 // terms a GPU flushes to 0). The 96 products of the parts are exact (Dekker);
 // repeated error-free passes (Ogita, Rump & Oishi's VecSum) carry the sum to
 // the last term until it outweighs the rest. Rarely run: the exact triangle
-// test calls it only for a ray within 2^-40 of an edge. Twin: orient_sign in
-// src/ff.rs.
+// test calls it only for a ray within 2^-40 of an edge, and its loops stay
+// rolled ([[dont_unroll]]; includers enable GL_EXT_control_flow_attributes).
+// Twin: orient_sign in src/ff.rs.
 int ff_orient_sign(vec2 x[3], vec2 y[3], vec3 d) {
     float t[96];
     uint n = 0u;
-    for (uint c = 0u; c < 3u; ++c) {
+    [[dont_unroll]] for (uint c = 0u; c < 3u; ++c) {
         // (x × y)_c = x_a y_b - x_b y_a.
         uint a = (c + 1u) % 3u;
         uint b = (c + 2u) % 3u;
-        for (uint i = 0u; i < 2u; ++i) {
-            for (uint j = 0u; j < 2u; ++j) {
+        [[dont_unroll]] for (uint i = 0u; i < 2u; ++i) {
+            [[dont_unroll]] for (uint j = 0u; j < 2u; ++j) {
                 vec2 p = ff_two_prod(x[a][i], y[b][j]);
                 vec2 q = ff_two_prod(x[b][i], y[a][j]);
                 vec4 f = vec4(p.x, p.y, -q.x, -q.y);
-                for (uint k = 0u; k < 4u; ++k) {
+                [[dont_unroll]] for (uint k = 0u; k < 4u; ++k) {
                     vec2 e = ff_two_prod(f[k], d[c]);
                     t[n] = e.x;
                     t[n + 1u] = e.y;
@@ -150,18 +151,18 @@ int ff_orient_sign(vec2 x[3], vec2 y[3], vec3 d) {
             }
         }
     }
-    for (uint pass = 0u; pass < 16u; ++pass) {
+    [[dont_unroll]] for (uint pass = 0u; pass < 16u; ++pass) {
         // One VecSum pass: the running sum moves to the last slot, each step's
         // rounding error stays behind; the terms' sum is unchanged.
         float s = t[0];
-        for (uint i = 1u; i < 96u; ++i) {
+        [[dont_unroll]] for (uint i = 1u; i < 96u; ++i) {
             vec2 e = ff_two_sum(s, t[i]);
             t[i - 1u] = e.y;
             s = e.x;
         }
         t[95] = s;
         precise float rest = 0.0;
-        for (uint i = 0u; i < 95u; ++i) rest = rest + abs(t[i]);
+        [[dont_unroll]] for (uint i = 0u; i < 95u; ++i) rest = rest + abs(t[i]);
         // rest is within 96 roundings (2^-17.4) of the exact sum of magnitudes.
         precise float margin = rest * 1.0000152587890625;
         if (abs(s) > margin) return s > 0.0 ? 1 : -1;

@@ -263,7 +263,7 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
     if (band[0] || band[1] || band[2]) {
         vec3 vs[3] = vec3[3](v0, v1, v2);
         vec2 uvw[3] = vec2[3](u, v, w);
-        for (uint k = 0u; k < 3u; ++k) {
+        [[dont_unroll]] for (uint k = 0u; k < 3u; ++k) {
             if (!band[k]) continue;
             int s = edge_sign_exact(vs[(k + 2u) % 3u], vs[(k + 1u) % 3u], r.origin, r.dir);
             vec2 e = uvw[k];
