@@ -33,7 +33,6 @@ const bool SEGMENT_FRAME = ROBUST && PASS != PASS_FAST;
 
 #include "triangle.glsl"
 
-
 // Nodes and triangles are read-only storage texel buffers (imageLoad of an
 // imageBuffer), not storage buffers: lavapipe loads a storage buffer one lane and
 // one 32-bit component at a time, whereas an image load is a straight-line gather
@@ -63,9 +62,6 @@ layout(std430, set = 0, binding = BINDING_INDIRECT) readonly buffer Indirect { u
 layout(push_constant) uniform Push { TraceParams params; };
 
 #include "batch.glsl"
-
-const float FLT_MIN_NORMAL = 1.17549435e-38;
-const float FLT_MAX = 3.40282347e38;
 
 // The traversal pieces (segment, node, decide, seek, leaf, boxes) come with the
 // variants that include them; each names the buffers and constants above it reads.

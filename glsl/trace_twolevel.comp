@@ -92,9 +92,6 @@ layout(std430, set = 0, binding = TL_BINDING_INDIRECT) readonly buffer Indirect 
 
 #include "batch.glsl"
 
-const float FLT_MIN_NORMAL = 1.17549435e-38;
-const float FLT_MAX = 3.40282347e38;
-
 // Where the geometry of the instance being traced starts in the shared buffers.
 uint node_base = 0u;
 uint texel_base = 0u;

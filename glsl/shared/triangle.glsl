@@ -68,9 +68,10 @@ WatertightRay watertight_ray(vec3 origin, vec3 dir) {
     return r;
 }
 
-// The smallest normal and the largest finite f32.
-const float TRI_FLT_MIN = 1.17549435e-38;
-const float TRI_FLT_MAX = 3.40282347e38;
+// The smallest normal and the largest finite f32 (also for the traversal code
+// of the kernels that include this file).
+const float FLT_MIN_NORMAL = 1.17549435e-38;
+const float FLT_MAX = 3.40282347e38;
 
 // The error bound of an f32 edge function relative to its terms' magnitude
 // (EDGE_GAMMA_LOG2 from src/consts.rs).
@@ -426,13 +427,13 @@ uint intersect_triangle_f32(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float tm
         // Any sign in doubt, or a bound below the smallest normal f32 (coordinates
         // under about 1e-16 of the ray's scale: the bound lost its meaning, and a GPU
         // flushes it to 0): decide exactly.
-        if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew) || bound < TRI_FLT_MIN) return TRI_UNSURE;
+        if (!(abs(u) > eu && abs(v) > ev && abs(w) > ew) || bound < FLT_MIN_NORMAL) return TRI_UNSURE;
     }
     precise float det = u + v + w;
     if (det == 0.0) return TRI_MISS;
     // The edge functions overflowed (coordinates above about 1e19 of the ray's
     // scale): the exact test scales them.
-    if (ROBUST && !(abs(det) <= TRI_FLT_MAX)) return TRI_UNSURE;
+    if (ROBUST && !(abs(det) <= FLT_MAX)) return TRI_UNSURE;
     precise float az = r.sz * a[r.kz];
     precise float bz = r.sz * b[r.kz];
     precise float cz = r.sz * c[r.kz];

@@ -5,7 +5,7 @@
 // and shares the far-ray functions.
 //
 // Expects from its includer: the specialization constants ROBUST and PASS,
-// SEGMENT_FRAME, FLT_MIN_NORMAL and FLT_MAX, and what leaf.glsl expects.
+// SEGMENT_FRAME, FLT_MIN_NORMAL and FLT_MAX (triangle.glsl), and what leaf.glsl expects.
 #ifndef TRAVERSE_RAY_SETUP_GLSL
 #define TRAVERSE_RAY_SETUP_GLSL
 
