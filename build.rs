@@ -62,6 +62,19 @@ mod example_consts {
     include!("glsl/examples/abi.rs");
 }
 
+/// Kernels that build.rs compiles once per traversal variant, with the define
+/// `TRACE_MODULE_VARIANT` set to the variant's id (`VARIANT_*`): `shaders::TRACE`
+/// and `shaders::TRACE_TWOLEVEL` are slices of modules by variant id. A module
+/// then holds one variant's traversal (its inlined leaf loops and exact
+/// fallback) instead of all seven: under the validation layer, every pipeline
+/// creation with specialization constants re-validates its module whole, which
+/// was most of the test suite's time with one 1.9 MB module.
+const PER_VARIANT: &[(&str, &[u32])] = &[
+    ("trace", &[0, 1, 2, 3, 4, 5, 6]),
+    // The two-level kernel's variants: stack, restart, push-down and the short stacks.
+    ("trace_twolevel", &[0, 1, 2, 3, 4]),
+];
+
 fn main() -> Result<()> {
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR")?);
     let glsl = root.join("glsl");
@@ -114,6 +127,36 @@ fn main() -> Result<()> {
     // Every module's constant and display name, for `shaders::ALL`.
     let mut all: Vec<(String, String)> = Vec::new();
     for path in &kernels {
+        let stem = path.file_stem().unwrap().to_string_lossy().to_string();
+        if let Some(&(_, variants)) = PER_VARIANT.iter().find(|(s, _)| *s == stem) {
+            let mut modules = Vec::new();
+            for &variant in variants {
+                let defines = [&kernel_defines[..], &[("TRACE_MODULE_VARIANT", variant)]].concat();
+                match compile(&compiler, path, &include_dirs, &defines) {
+                    Ok(words) => {
+                        let name = format!("{stem}_v{variant}");
+                        let spv = out_dir.join(format!("{name}.spv"));
+                        fs::write(&spv, bytemuck_bytes(&words))?;
+                        let constant = name.to_uppercase();
+                        rs.push_str(&format!(
+                            "/// SPIR-V of `glsl/{stem}.comp` for traversal variant {variant} (`TRACE_MODULE_VARIANT`).\n\
+                             pub const {constant}: &[u8] = include_bytes!({:?});\n",
+                            spv.display().to_string()
+                        ));
+                        all.push((constant.clone(), format!("{stem}[{variant}]")));
+                        modules.push(constant);
+                    }
+                    Err(e) => errors.push(e.to_string()),
+                }
+            }
+            rs.push_str(&format!(
+                "/// The modules of `glsl/{stem}.comp`, by traversal variant id (`VARIANT_*`; one module each).\n\
+                 pub const {}: &[&[u8]] = &[{}];\n",
+                stem.to_uppercase(),
+                modules.join(", ")
+            ));
+            continue;
+        }
         match compile(&compiler, path, &include_dirs, &kernel_defines) {
             Ok(words) => {
                 let stem = path.file_stem().unwrap().to_string_lossy().to_string();
@@ -317,10 +360,9 @@ fn compile(
     options.set_target_env(shaderc::TargetEnv::Vulkan, shaderc::EnvVersion::Vulkan1_2 as u32);
     options.set_target_spirv(shaderc::SpirvVersion::V1_5);
     options.set_optimization_level(shaderc::OptimizationLevel::Performance);
-    // No debug info: it made trace.spv 2.3 MB instead of 1.8 MB, and the
-    // validation layer re-validates the whole module at every pipeline creation
-    // with specialization constants (about 1.2 s of a trace pipeline's 1.8 s on
-    // lavapipe under validation, most of the test suite's time).
+    // No debug info: it made the one trace module of the time 2.3 MB instead of
+    // 1.8 MB, and the validation layer re-validates the whole module at every
+    // pipeline creation with specialization constants (see PER_VARIANT).
     for (name, value) in defines {
         options.add_macro_definition(name, Some(&format!("{value}u")));
     }

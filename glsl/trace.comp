@@ -19,7 +19,10 @@
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
 // Specialization constants (src/trace.rs sets them; never edit the source to switch).
-layout(constant_id = TRACE_SPEC_VARIANT) const uint VARIANT = VARIANT_STACK;
+// build.rs compiles this kernel once per variant (TRACE_MODULE_VARIANT): a
+// module holds one traversal, so the validation layer, which re-validates the
+// module at every pipeline creation, reads a seventh of the code.
+const uint VARIANT = TRACE_MODULE_VARIANT;
 layout(constant_id = TRACE_SPEC_COUNTERS) const bool COUNTERS = false;
 layout(constant_id = TRACE_SPEC_STACK_SIZE) const uint STACK_SIZE = 3u;   // short-stack entries, 1..MAX_SHORT_STACK
 layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;   // stop at the first hit (shadow rays)

@@ -25,8 +25,9 @@
 
 layout(local_size_x = TRACE_WORKGROUP_SIZE) in;
 
-// The trace kernel's specialization constants, same ids (src/twolevel/gpu.rs sets them).
-layout(constant_id = TRACE_SPEC_VARIANT) const uint VARIANT = VARIANT_STACK;
+// One module per variant (build.rs sets TRACE_MODULE_VARIANT), as trace.comp.
+const uint VARIANT = TRACE_MODULE_VARIANT;
+// The trace kernel's specialization constants, same ids (src/twolevel/pipelines.rs sets them).
 layout(constant_id = TRACE_SPEC_COUNTERS) const bool COUNTERS = false;         // unused here
 layout(constant_id = TRACE_SPEC_STACK_SIZE) const uint STACK_SIZE = 3u;
 layout(constant_id = TRACE_SPEC_ANY_HIT) const bool ANY_HIT = false;

@@ -51,28 +51,27 @@ pub const PRIM_INVALID: u32 = 0xFFFF_FFFE;
 pub const PRIM_INCOMPLETE: u32 = 0xFFFF_FFFD;
 
 // Specialization constant ids of the trace kernel (32-bit each; bools as 0/1).
-/// The traversal variant (`VARIANT_*`).
-pub const TRACE_SPEC_VARIANT: u32 = 0;
+// The variant is not one of them: build.rs compiles one module per variant.
 /// Write per-ray counters (`bool`).
-pub const TRACE_SPEC_COUNTERS: u32 = 1;
+pub const TRACE_SPEC_COUNTERS: u32 = 0;
 /// Short-stack entries, 1..=`MAX_SHORT_STACK`.
-pub const TRACE_SPEC_STACK_SIZE: u32 = 2;
+pub const TRACE_SPEC_STACK_SIZE: u32 = 1;
 /// Stop at the first hit (shadow rays; `bool`).
-pub const TRACE_SPEC_ANY_HIT: u32 = 3;
+pub const TRACE_SPEC_ANY_HIT: u32 = 2;
 /// Lanes per packet; 1 = single rays.
-pub const TRACE_SPEC_PACKET_WIDTH: u32 = 4;
+pub const TRACE_SPEC_PACKET_WIDTH: u32 = 3;
 /// Conservative decisions and the exact fallback near edges (`bool`).
-pub const TRACE_SPEC_ROBUST: u32 = 5;
+pub const TRACE_SPEC_ROBUST: u32 = 4;
 /// The pass (`PASS_*`).
-pub const TRACE_SPEC_PASS: u32 = 6;
+pub const TRACE_SPEC_PASS: u32 = 5;
 /// Number of specialization constants of the trace kernel.
-pub const TRACE_SPECS: u32 = 7;
+pub const TRACE_SPECS: u32 = 6;
 /// The ray-query kernel's only specialization constant: stop at the first hit (`bool`).
 pub const RQ_SPEC_ANY_HIT: u32 = 0;
 /// Number of specialization constants of the ray-query kernel.
 pub const RQ_SPECS: u32 = 1;
 
-// Traversal variant ids (specialization constant `TRACE_SPEC_VARIANT` of the trace kernel).
+// Traversal variant ids: the index of a trace kernel's module (`shaders::TRACE`, define `TRACE_MODULE_VARIANT`).
 /// Variant id of `stack`: full per-ray stack (pbrt-v3), the baseline.
 pub const VARIANT_STACK: u32 = 0;
 /// Variant id of `restart`: kd-restart from the root (Foley & Sugerman 2005).
@@ -282,7 +281,6 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("PRIM_MISS", PRIM_MISS),
     ("PRIM_INVALID", PRIM_INVALID),
     ("PRIM_INCOMPLETE", PRIM_INCOMPLETE),
-    ("TRACE_SPEC_VARIANT", TRACE_SPEC_VARIANT),
     ("TRACE_SPEC_COUNTERS", TRACE_SPEC_COUNTERS),
     ("TRACE_SPEC_STACK_SIZE", TRACE_SPEC_STACK_SIZE),
     ("TRACE_SPEC_ANY_HIT", TRACE_SPEC_ANY_HIT),

@@ -46,7 +46,16 @@ fn capabilities(spirv: &[u8]) -> Vec<u32> {
 fn no_module_declares_a_64_bit_capability() {
     // Float64 = 10, Int64 = 11, Int64Atomics = 12, Int64ImageEXT = 5016.
     let forbidden = [(10, "Float64"), (11, "Int64"), (12, "Int64Atomics"), (5016, "Int64ImageEXT")];
-    for kernel in ["trace", "trace_twolevel", "render_shade", "divergence_replay", "example_shade"] {
+    // The trace kernels come as one module per variant (`trace[0]` = stack, ...).
+    for kernel in [
+        "trace[0]",
+        "trace[6]",
+        "trace_twolevel[0]",
+        "trace_twolevel[4]",
+        "render_shade",
+        "divergence_replay",
+        "example_shade",
+    ] {
         assert!(MODULES.iter().any(|(n, _)| *n == kernel), "{kernel} is not in shaders::ALL");
     }
     for (name, spirv) in MODULES {

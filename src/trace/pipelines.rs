@@ -8,7 +8,7 @@ use crate::consts::{
     BINDING_NODES, BINDING_TRIANGLES, ORDER_BINDINGS, ORDER_STEP_COUNT, ORDER_STEP_SCAN, ORDER_STEP_SCATTER,
     ORDER_WORKGROUP_SIZE, PASS_CAREFUL, PASS_FAST, PASS_ONE, TRACE_BINDINGS, TRACE_SPECS, TRACE_SPEC_ANY_HIT,
     TRACE_SPEC_COUNTERS, TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE,
-    TRACE_SPEC_VARIANT, TRACE_WORKGROUP_SIZE,
+    TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::gpu::{in_order, shaders, GpuContext, Kernel, KernelDesc};
@@ -141,7 +141,8 @@ impl TracePipelines {
         }
         let desc = KernelDesc {
             name: "trace",
-            spirv: shaders::TRACE,
+            // One module per variant (build.rs).
+            spirv: shaders::TRACE[key.variant.id() as usize],
             bindings: TRACE_BINDINGS,
             push_constant_size: std::mem::size_of::<TraceParams>() as u32,
             spec_constants: &[],
@@ -161,7 +162,6 @@ impl TracePipelines {
         };
         let spec = |pass: u32| {
             in_order::<_, { TRACE_SPECS as usize }>([
-                (TRACE_SPEC_VARIANT, key.variant.id()),
                 (TRACE_SPEC_COUNTERS, counters as u32),
                 (TRACE_SPEC_STACK_SIZE, key.stack_size),
                 (TRACE_SPEC_ANY_HIT, key.any_hit as u32),

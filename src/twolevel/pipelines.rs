@@ -8,8 +8,7 @@ use crate::abi::TwoLevelParams;
 use crate::consts::{
     TL_BINDINGS, TL_BINDING_GEOMETRIES, TL_BINDING_INSTANCES, TL_BINDING_NODES, TL_BINDING_ORDER, TL_BINDING_TOP,
     TL_BINDING_TRIANGLES, TL_SPEC_ONE_INSTANCE, TRACE_SPECS, TRACE_SPEC_ANY_HIT, TRACE_SPEC_COUNTERS,
-    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_SPEC_VARIANT,
-    TRACE_WORKGROUP_SIZE,
+    TRACE_SPEC_PACKET_WIDTH, TRACE_SPEC_PASS, TRACE_SPEC_ROBUST, TRACE_SPEC_STACK_SIZE, TRACE_WORKGROUP_SIZE,
 };
 use crate::error::{Error, Result};
 use crate::gpu::{in_order, shaders, GpuContext, Kernel, KernelDesc};
@@ -148,7 +147,6 @@ fn compile_passes(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool) -> 
 /// instance or any.
 fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool, pass: u32) -> Result<Kernel> {
     let spec = in_order::<_, { TRACE_SPECS as usize + 1 }>([
-        (TRACE_SPEC_VARIANT, key.variant.id()),
         (TRACE_SPEC_COUNTERS, 0),
         (TRACE_SPEC_STACK_SIZE, key.stack_size),
         (TRACE_SPEC_ANY_HIT, key.any_hit as u32),
@@ -157,11 +155,15 @@ fn compile(ctx: &Arc<GpuContext>, key: Traversal, one_instance: bool, pass: u32)
         (TRACE_SPEC_PASS, pass),
         (TL_SPEC_ONE_INSTANCE, one_instance as u32),
     ]);
+    // One module per variant (build.rs); the two-level variants come first.
+    let spirv = shaders::TRACE_TWOLEVEL
+        .get(key.variant.id() as usize)
+        .ok_or_else(|| Error::InvalidInput(format!("the two-level kernel has no {} traversal", key.variant.name())))?;
     Kernel::new(
         ctx,
         &KernelDesc {
             name: "trace_twolevel",
-            spirv: shaders::TRACE_TWOLEVEL,
+            spirv,
             bindings: TL_BINDINGS,
             push_constant_size: std::mem::size_of::<TwoLevelParams>() as u32,
             spec_constants: &spec,

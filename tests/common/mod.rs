@@ -35,10 +35,10 @@ pub fn try_context(ray_query: bool) -> kdtrace::Result<Arc<GpuContext>> {
 
 /// One context for every test of a test binary that asks for it, with one set
 /// of trace pipelines that their tracers share ([`trace`]): under the
-/// validation layer, creating a trace pipeline costs about 1.8 s on lavapipe
-/// (1.2 s of it the layer re-validating the 1.8 MB kernel with its
-/// specialization constants applied), and the tests of a binary need many of
-/// the same pipelines. The tests of a binary run on parallel threads, so a
+/// validation layer, creating a trace pipeline costs lavapipe's compile plus
+/// the layer re-validating the kernel's module with its specialization
+/// constants applied (one module per variant, 0.3-0.6 MB), and the tests of a
+/// binary need many of the same pipelines. The tests of a binary run on parallel threads, so a
 /// validation message is reported by whichever of them checks first
 /// ([`assert_validation_clean`]); the binary fails either way. So it is not
 /// for binaries with a test that provokes a validation message on purpose
