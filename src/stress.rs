@@ -200,7 +200,9 @@ pub fn stress_rays(category: Category, triangles: &[[Vec3; 3]], tree: &KdTree, c
     }
     let bounds = tree.bounds;
     let size = bounds.extent().max_element().max(f32::MIN_POSITIVE);
-    let diagonal = bounds.extent().length().max(f32::MIN_POSITIVE);
+    // In f64: an f32 length overflows for extents above about 1e19 (the far
+    // categories then made no finite ray at all).
+    let diagonal = (bounds.extent().as_dvec3().length() as f32).max(f32::MIN_POSITIVE);
     let mut s = Source { triangles, live, bounds, size, rng: SplitMix64(seed ^ (category as u64) << 32) };
     let mut splits = Vec::new();
     if category == Category::SplitPlaneOrigin {

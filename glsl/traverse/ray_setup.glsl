@@ -116,11 +116,17 @@ float next_up(float x) {
 
 // True when the box entry t0 lies more than SHIFT_DIAGONALS scene diagonals
 // along the ray (squared lengths: no sqrt, whose rounding GPUs do not fix).
+// Lengths are scaled by the power of two that brings the box's largest extent
+// to [1, 2), exactly: the squares of a scene's extents above about 1e19
+// overflowed f32 (no ray was far, so none was shifted, and far rays' hits
+// tied in t) and those below about 1e-19 underflowed.
 bool is_far(TraceRay r, float t0, vec3 bmin, vec3 bmax) {
     precise vec3 ext = bmax - bmin;
-    precise float diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
+    int s = exponent_of(max(ext.x, max(ext.y, ext.z)));
+    precise vec3 e = vec3(ldexp2(ext.x, -s), ldexp2(ext.y, -s), ldexp2(ext.z, -s));
+    precise float diag2 = e.x * e.x + e.y * e.y + e.z * e.z;
     vec3 ad = abs(r.dir);
-    precise float dist = t0 * max(ad.x, max(ad.y, ad.z));
+    precise float dist = ldexp2(t0 * max(ad.x, max(ad.y, ad.z)), -s);
     precise float far2 = float(SHIFT_DIAGONALS * SHIFT_DIAGONALS) * diag2;
     return t0 > 0.0 && dist * dist > far2;
 }

@@ -318,12 +318,16 @@ fn next_up(x: f32) -> f32 {
     }
 }
 
-/// Twin of `is_far` in trace.comp: the box entry `t0` lies more than
+/// Twin of `is_far` in ray_setup.glsl: the box entry `t0` lies more than
 /// [`SHIFT_DIAGONALS`](crate::consts::SHIFT_DIAGONALS) scene diagonals along the ray.
+/// Lengths scaled by a power of two (the box's largest extent to `[1, 2)`), so
+/// that the squares neither overflow nor underflow (see trace.comp).
 fn is_far(r: &TraceRay, b: &Aabb, t0: f32) -> bool {
     let ext = b.max - b.min;
-    let diag2 = ext.x * ext.x + ext.y * ext.y + ext.z * ext.z;
-    let dist = t0 * glsl_max(r.dir.x.abs(), glsl_max(r.dir.y.abs(), r.dir.z.abs()));
+    let s = exponent_of(glsl_max(ext.x, glsl_max(ext.y, ext.z)));
+    let e = Vec3::new(ldexp2(ext.x, -s), ldexp2(ext.y, -s), ldexp2(ext.z, -s));
+    let diag2 = e.x * e.x + e.y * e.y + e.z * e.z;
+    let dist = ldexp2(t0 * glsl_max(r.dir.x.abs(), glsl_max(r.dir.y.abs(), r.dir.z.abs())), -s);
     let far2 = (crate::consts::SHIFT_DIAGONALS * crate::consts::SHIFT_DIAGONALS) as f32 * diag2;
     t0 > 0.0 && dist * dist > far2
 }
