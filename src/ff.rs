@@ -154,26 +154,28 @@ pub fn exact_sum8(terms: [f32; 8]) -> Ff {
     two_sum(h[7], rest)
 }
 
-/// Terms of [`orient_sign`]'s expansion: 3 cross-product components × 4 pairs of
-/// parts × 2 products × 2 parts, each times one direction component (2 parts).
-const ORIENT_TERMS: usize = 96;
+/// Terms of [`orient_sign`]'s expansion at most: 3 cross-product components × 4
+/// pairs of parts × 2 products × 2 parts, each times one component of the third
+/// vector (1 part for an f32 vector, 2 for float-float) × 2 parts.
+const ORIENT_TERMS: usize = 192;
 
 /// `2^-100`: a determinant of unit-scaled vectors at most this far from 0 counts
 /// as 0 (far below every rounding the kernels make; above the error of terms
 /// flushed to 0 on a GPU without denormals).
 const ORIENT_ZERO: f32 = 7.888_609e-31;
 
-/// The sign of `det[x, y, d] = d · (x × y)` for `x`, `y` exact float-float
-/// vectors and `d` an f32 vector, each scaled by a power of two so that its
-/// largest component lies in `[1, 2)`: -1, 0 or 1, exact unless the determinant
-/// lies within `2^-100` of 0 (then 0). The 96 products of the parts are exact
-/// (Dekker), and repeated error-free passes over them (Ogita, Rump & Oishi's
-/// VecSum) carry the sum to the last term until it outweighs the rest. Twin of
-/// `ff_orient_sign` in ff.glsl.
-pub fn orient_sign(x: [Ff; 3], y: [Ff; 3], d: [f32; 3]) -> i32 {
+/// The sign of `det[x, y, z] = z · (x × y)` for `x`, `y`, `z` exact float-float
+/// vectors, each scaled by a power of two so that its largest component lies
+/// in `[1, 2)`: -1, 0 or 1, exact unless the determinant lies within `2^-100`
+/// of 0 (then 0). The products of the parts (96 when `z` is an f32 vector, all
+/// its low parts 0; else 192) are exact (Dekker), and repeated error-free
+/// passes over them (Ogita, Rump & Oishi's VecSum) carry the sum to the last
+/// term until it outweighs the rest. Twin of `ff_orient_sign` in ff.glsl.
+pub fn orient_sign(x: [Ff; 3], y: [Ff; 3], z: [Ff; 3]) -> i32 {
     let mut t = [0.0f32; ORIENT_TERMS];
     let mut n = 0;
-    for (c, &dc) in d.iter().enumerate() {
+    let parts = if z.iter().any(|c| c.lo != 0.0) { 2 } else { 1 };
+    for (c, zc) in z.iter().enumerate() {
         // (x × y)_c = x_a y_b - x_b y_a.
         let (a, b) = ((c + 1) % 3, (c + 2) % 3);
         let (xa, xb, ya, yb) = ([x[a].hi, x[a].lo], [x[b].hi, x[b].lo], [y[a].hi, y[a].lo], [y[b].hi, y[b].lo]);
@@ -182,26 +184,29 @@ pub fn orient_sign(x: [Ff; 3], y: [Ff; 3], d: [f32; 3]) -> i32 {
                 let p = two_prod(xa[i], yb[j]);
                 let q = two_prod(xb[i], ya[j]);
                 for f in [p.hi, p.lo, -q.hi, -q.lo] {
-                    let e = two_prod(f, dc);
-                    t[n] = e.hi;
-                    t[n + 1] = e.lo;
-                    n += 2;
+                    for &zp in &[zc.hi, zc.lo][..parts] {
+                        let e = two_prod(f, zp);
+                        t[n] = e.hi;
+                        t[n + 1] = e.lo;
+                        n += 2;
+                    }
                 }
             }
         }
     }
+    let t = &mut t[..n];
     for _ in 0..16 {
         // One VecSum pass: the running sum moves to the last slot, each step's
         // rounding error stays behind; the terms' sum is unchanged.
         let mut s = t[0];
-        for i in 1..ORIENT_TERMS {
+        for i in 1..n {
             let e = two_sum(s, t[i]);
             t[i - 1] = e.lo;
             s = e.hi;
         }
-        t[ORIENT_TERMS - 1] = s;
-        let rest = t[..ORIENT_TERMS - 1].iter().fold(0.0f32, |acc, x| acc + x.abs());
-        // rest is within 96 roundings (2^-17.4) of the exact sum of magnitudes.
+        t[n - 1] = s;
+        let rest = t[..n - 1].iter().fold(0.0f32, |acc, x| acc + x.abs());
+        // rest is within 191 roundings (2^-16.4) of the exact sum of magnitudes.
         if s.abs() > rest * 1.000_015_3 {
             return if s > 0.0 { 1 } else { -1 };
         }

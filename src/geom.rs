@@ -212,13 +212,27 @@ pub(crate) fn edge_sign(p: Vec3, q: Vec3, o: Vec3, dir: Vec3) -> i32 {
     let x = unit([0, 1, 2].map(|i| Ff::diff(f[i], o[i])));
     let y = unit([0, 1, 2].map(|i| Ff::diff(g[i], o[i])));
     let ed = exponent_of(dir.x.abs().max(dir.y.abs()).max(dir.z.abs()));
-    let d = [0, 1, 2].map(|i| ldexp2(dir[i], -ed));
+    let d = [0, 1, 2].map(|i| Ff::from_f32(ldexp2(dir[i], -ed)));
     let s = orient_sign(x, y, d);
     if swap {
         -s
     } else {
         s
     }
+}
+
+/// The side of the plane through `v0, v1, v2` that `o` lies on: the sign of
+/// `det[v0 - o, v1 - o, v2 - o]` (the numerator of the exact test's `t`, whose
+/// float-float value can miss the sign of an origin exactly on the plane),
+/// exact unless within 2^-100 of the vectors' magnitudes (then 0, on the
+/// plane). Twin of `plane_side_exact` in triangle.glsl.
+pub(crate) fn plane_side(v0: Vec3, v1: Vec3, v2: Vec3, o: Vec3) -> i32 {
+    let unit = |v: Vec3| {
+        let x = [0, 1, 2].map(|i| Ff::diff(v[i], o[i]));
+        let e = exponent_of(x[0].hi.abs().max(x[1].hi.abs()).max(x[2].hi.abs()));
+        x.map(|c| ff_ldexp(c, -e))
+    };
+    orient_sign(unit(v0), unit(v1), unit(v2))
 }
 
 /// The sheared coordinate `(v - o)·dz - s·(v_z - o_z)` from offsets scaled by
@@ -578,13 +592,34 @@ impl WatertightRay {
             (own[0].mul(n[0]).add(own[1].mul(n[1])).add(own[2].mul(n[2])), eq - eo)
         };
         let side = |b: f32| quotient_side(bound_num, den, Ff::from_f32(b), bound_k);
-        let above_min = if tmin.is_infinite() { tmin < 0.0 } else { side(tmin) >= 0 };
+        // A ray from a point of the triangle's plane (tmin = 0, a ray leaving a
+        // surface from its exact point): num's float-float value is within its
+        // rounding of 0, and its sign is the plane side's (see triangle.glsl).
+        let (mut gated, mut at_origin) = (false, false);
+        let mut above_min = if tmin.is_infinite() { tmin < 0.0 } else { side(tmin) >= 0 };
+        if tmin == 0.0 && self.t_shift == 0.0 {
+            let mut mag = 0.0f32;
+            for (i, ai) in a.iter().enumerate() {
+                let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+                mag += ai.hi.abs() * ((e1[j].hi * e2[k].hi).abs() + (e1[k].hi * e2[j].hi).abs());
+            }
+            if num.hi.abs() <= mag * (1.0 / 1_099_511_627_776.0) {
+                // 2^-40
+                let s = plane_side(v0, v1, v2, self.origin);
+                above_min = s == 0 || (s > 0) == (den.hi > 0.0);
+                (gated, at_origin) = (true, s == 0);
+            }
+        }
         let below_max = if self.ray_tmax.is_infinite() { self.ray_tmax > 0.0 } else { side(self.ray_tmax) <= 0 };
         if !(above_min && below_max) {
             return None;
         }
-        // t along the unscaled direction: t' 2^(es - eq).
-        let t_scaled = num.div(den);
+        // t along the unscaled direction: t' 2^(es - eq); 0 for an origin on the
+        // plane, or within rounding of it on the side away from the ray.
+        let mut t_scaled = num.div(den);
+        if gated && (at_origin || t_scaled.hi < 0.0) {
+            t_scaled = Ff::from_f32(0.0);
+        }
         let t = ff_ldexp(t_scaled, es - eq);
         let mut err = 0.0f32;
         if self.t_shift != 0.0 {
@@ -634,5 +669,38 @@ mod tests {
             let larger_den = Ff { hi: den * (1.0 + 1.0 / 256.0), lo: 0.0 };
             assert_eq!(quotient_side(Ff::from_f32(num), larger_den, b, k), -1, "below the bound at 2^{k}");
         }
+    }
+
+    /// A ray leaving a slanted triangle from one of its vertices (tmin = 0, the
+    /// origin exactly on the plane) hits it at t = 0, for triangles of f32
+    /// coordinates from 1e-20 to 1e20 in size. Before plane_side, the exact
+    /// test's float-float numerator of `t` came out a rounding below 0 for
+    /// some of these and the triangle was missed (Cornell box ×1e-5: rays from
+    /// its corners, vertex-coord origin 99.4 %).
+    #[test]
+    fn rays_from_a_vertex_hit_their_triangle_at_t_0() {
+        let mut rng = crate::raygen::SplitMix64(17);
+        let mut missed = 0;
+        let mut total = 0;
+        for trial in 0..4000 {
+            let scale = 10f32.powi(trial % 41 - 20);
+            let mut p = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * scale;
+            let tri = [p(), p(), p()];
+            let n = (tri[1] - tri[0]).as_dvec3().cross((tri[2] - tri[0]).as_dvec3());
+            let k = 1 + (trial as usize % 2);
+            let dir = rng.unit_vector();
+            // Directions near the plane leave it too slowly to matter here.
+            if n.length() == 0.0 || (n.normalize().dot(dir.as_dvec3())).abs() < 0.05 {
+                continue;
+            }
+            total += 1;
+            let ray = WatertightRay::new(tri[k], dir);
+            match ray.intersect(tri[0], tri[1], tri[2], 0.0, f32::INFINITY) {
+                Some((t, _, _)) => assert_eq!(t, 0.0, "{tri:?} from vertex {k} along {dir}"),
+                None => missed += 1,
+            }
+        }
+        assert!(total > 3000, "{total} rays");
+        assert_eq!(missed, 0, "{missed} of {total} rays from a vertex missed their triangle");
     }
 }

@@ -120,19 +120,21 @@ vec2 ff_exact_sum8(float terms[8]) {
     return ff_two_sum(h[7], rest);
 }
 
-// The sign of det[x, y, d] = d . (x × y) for float-float vectors x, y and an
-// f32 vector d, each scaled by a power of two so that its largest component
-// lies in [1, 2): -1, 0 or 1, exact unless the determinant lies within 2^-100
-// of 0 (then 0; far below every rounding the kernels make, above the error of
-// terms a GPU flushes to 0). The 96 products of the parts are exact (Dekker);
-// repeated error-free passes (Ogita, Rump & Oishi's VecSum) carry the sum to
-// the last term until it outweighs the rest. Rarely run: the exact triangle
-// test calls it only for a ray within 2^-40 of an edge, and its loops stay
-// rolled ([[dont_unroll]]; includers enable GL_EXT_control_flow_attributes).
-// Twin: orient_sign in src/ff.rs.
-int ff_orient_sign(vec2 x[3], vec2 y[3], vec3 d) {
-    float t[96];
+// The sign of det[x, y, z] = z . (x × y) for float-float vectors x, y, z,
+// each scaled by a power of two so that its largest component lies in [1, 2):
+// -1, 0 or 1, exact unless the determinant lies within 2^-100 of 0 (then 0;
+// far below every rounding the kernels make, above the error of terms a GPU
+// flushes to 0). The products of the parts (96 when z's low parts are all 0, a
+// direction; else 192) are exact (Dekker); repeated error-free passes (Ogita,
+// Rump & Oishi's VecSum) carry the sum to the last term until it outweighs the
+// rest. Rarely run: the exact triangle test calls it only for a ray within
+// 2^-40 of an edge or an origin within rounding of the triangle's plane, and
+// its loops stay rolled ([[dont_unroll]]; includers enable
+// GL_EXT_control_flow_attributes). Twin: orient_sign in src/ff.rs.
+int ff_orient_sign(vec2 x[3], vec2 y[3], vec2 z[3]) {
+    float t[192];
     uint n = 0u;
+    uint parts = (z[0].y != 0.0 || z[1].y != 0.0 || z[2].y != 0.0) ? 2u : 1u;
     [[dont_unroll]] for (uint c = 0u; c < 3u; ++c) {
         // (x × y)_c = x_a y_b - x_b y_a.
         uint a = (c + 1u) % 3u;
@@ -143,10 +145,12 @@ int ff_orient_sign(vec2 x[3], vec2 y[3], vec3 d) {
                 vec2 q = ff_two_prod(x[b][i], y[a][j]);
                 vec4 f = vec4(p.x, p.y, -q.x, -q.y);
                 [[dont_unroll]] for (uint k = 0u; k < 4u; ++k) {
-                    vec2 e = ff_two_prod(f[k], d[c]);
-                    t[n] = e.x;
-                    t[n + 1u] = e.y;
-                    n += 2u;
+                    [[dont_unroll]] for (uint m = 0u; m < parts; ++m) {
+                        vec2 e = ff_two_prod(f[k], z[c][m]);
+                        t[n] = e.x;
+                        t[n + 1u] = e.y;
+                        n += 2u;
+                    }
                 }
             }
         }
@@ -155,15 +159,15 @@ int ff_orient_sign(vec2 x[3], vec2 y[3], vec3 d) {
         // One VecSum pass: the running sum moves to the last slot, each step's
         // rounding error stays behind; the terms' sum is unchanged.
         float s = t[0];
-        [[dont_unroll]] for (uint i = 1u; i < 96u; ++i) {
+        [[dont_unroll]] for (uint i = 1u; i < n; ++i) {
             vec2 e = ff_two_sum(s, t[i]);
             t[i - 1u] = e.y;
             s = e.x;
         }
-        t[95] = s;
+        t[n - 1u] = s;
         precise float rest = 0.0;
-        [[dont_unroll]] for (uint i = 0u; i < 95u; ++i) rest = rest + abs(t[i]);
-        // rest is within 96 roundings (2^-17.4) of the exact sum of magnitudes.
+        [[dont_unroll]] for (uint i = 0u; i + 1u < n; ++i) rest = rest + abs(t[i]);
+        // rest is within 191 roundings (2^-16.4) of the exact sum of magnitudes.
         precise float margin = rest * 1.0000152587890625;
         if (abs(s) > margin) return s > 0.0 ? 1 : -1;
         precise float total = abs(s) + rest;

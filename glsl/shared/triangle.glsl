@@ -169,9 +169,26 @@ int edge_sign_exact(vec3 p, vec3 q, vec3 o, vec3 dir) {
         x[i] = ff_ldexp(x[i], -ex);
         y[i] = ff_ldexp(y[i], -ey);
     }
-    precise vec3 d = vec3(ldexp2(dir.x, -ed), ldexp2(dir.y, -ed), ldexp2(dir.z, -ed));
+    vec2 d[3] = vec2[3](vec2(ldexp2(dir.x, -ed), 0.0), vec2(ldexp2(dir.y, -ed), 0.0), vec2(ldexp2(dir.z, -ed), 0.0));
     int s = ff_orient_sign(x, y, d);
     return swap ? -s : s;
+}
+
+// The side of the plane through v0, v1, v2 that o lies on: the sign of
+// det[v0 - o, v1 - o, v2 - o], the numerator of the exact test's t (whose
+// float-float value can miss the sign of an origin exactly on the plane: a ray
+// leaving a surface from a vertex or edge of a slanted triangle), exact unless
+// within 2^-100 of the vectors' magnitudes (then 0: on the plane). Twin:
+// plane_side in src/geom.rs.
+int plane_side_exact(vec3 v0, vec3 v1, vec3 v2, vec3 o) {
+    vec3 vs[3] = vec3[3](v0, v1, v2);
+    vec2 x[3][3];
+    [[dont_unroll]] for (uint k = 0u; k < 3u; ++k) {
+        for (uint i = 0u; i < 3u; ++i) x[k][i] = ff_diff(vs[k][i], o[i]);
+        int e = exponent_of(max(max(abs(x[k][0].x), abs(x[k][1].x)), abs(x[k][2].x)));
+        for (uint i = 0u; i < 3u; ++i) x[k][i] = ff_ldexp(x[k][i], -e);
+    }
+    return ff_orient_sign(x[0], x[1], x[2]);
 }
 
 // The test in float-float (ff.glsl) on the f32 inputs, for rays near an edge, a
@@ -311,11 +328,36 @@ bool intersect_triangle_exact(WatertightRay r, vec3 v0, vec3 v1, vec3 v2, float 
         bound_k = eq - eo_own;
     }
     bool above_min = isinf(tmin) ? tmin < 0.0 : quotient_side(bound_num, den, ff_from(tmin), bound_k) >= 0;
+    // A ray from a point of the triangle's plane (tmin = 0: a ray leaving a
+    // surface from its exact point): when num lies within its float-float
+    // rounding of 0 (2^-40 of its terms' magnitudes), its sign is the plane
+    // side's, exactly (plane_side_exact), and t is 0 on the plane or within
+    // rounding of it.
+    bool gated = false;
+    bool at_origin = false;
+    if (tmin == 0.0 && r.t_shift == 0.0) {
+        precise float mag = 0.0;
+        for (uint i = 0u; i < 3u; ++i) {
+            uint j = (i + 1u) % 3u;
+            uint k = (i + 2u) % 3u;
+            precise float cross_mag = abs(e1[j].x * e2[k].x) + abs(e1[k].x * e2[j].x);
+            mag = mag + abs(a[i].x) * cross_mag;
+        }
+        precise float limit = mag * (1.0 / 1099511627776.0);  // 2^-40
+        if (abs(num.x) <= limit) {
+            int s = plane_side_exact(v0, v1, v2, r.origin);
+            above_min = s == 0 || (s > 0) == (den.x > 0.0);
+            gated = true;
+            at_origin = s == 0;
+        }
+    }
     bool below_max = isinf(r.ray_tmax) ? r.ray_tmax > 0.0
                                        : quotient_side(bound_num, den, ff_from(r.ray_tmax), bound_k) <= 0;
     if (!(above_min && below_max)) return false;
-    // t along the unscaled direction: t' 2^(es - eq).
+    // t along the unscaled direction: t' 2^(es - eq) (0 for an origin on the
+    // plane, or within rounding of it on the side away from the ray).
     vec2 t_scaled = ff_div(num, den);
+    if (gated && (at_origin || t_scaled.x < 0.0)) t_scaled = vec2(0.0);
     vec2 t = ff_ldexp(t_scaled, es - eq);
     err_out = 0.0;
     if (SEGMENT_FRAME && r.t_shift != 0.0) {
