@@ -12,7 +12,8 @@
 //! answer of at least `OVERALL_FLOOR` over all categories and `CATEGORY_FLOOR`
 //! in each, for every variant (any hit: `CATEGORY_FLOOR` in each category).
 //! Besides the shared scenes: trigonometric fans (coordinates 6e-17 beside 1) and
-//! the Cornell box at ×1e-20 and ×1e15. Watertightness: no escape with any variant. The
+//! the Cornell box at ×1e-20, ×1e15 and ×1e17; rays leaving slanted triangles from
+//! their vertices. Watertightness: no escape with any variant. The
 //! tables are printed (`--nocapture`).
 
 mod common;
@@ -548,10 +549,13 @@ fn stress_rays_gpu_equals_cpu_twin() {
         Category::FarGrazing,
         Category::BoundedSegment,
     ];
-    let scenes: [(&str, f32, &[Category], usize); 4] = [
+    let scenes: [(&str, f32, &[Category], usize); 6] = [
         ("teapot.obj", 1.0, &Category::ALL, 300),
         ("teapot.obj", 1e5, &Category::ALL, 300),
         ("cornell_box.obj", 1.0, &Category::ALL, 300),
+        // Extreme scales: exact tests of scaled inputs, far rays shifted at ×1e17.
+        ("cornell_box.obj", 1e-20, &Category::ALL, 100),
+        ("cornell_box.obj", 1e17, &Category::ALL, 100),
         ("bunny.obj", 1.0, &far, 100),
     ];
     for (name, scale, categories, per_category) in scenes {
