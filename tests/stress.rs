@@ -549,7 +549,9 @@ fn stress_rays_gpu_equals_cpu_twin() {
         Category::FarGrazing,
         Category::BoundedSegment,
     ];
-    let scenes: [(&str, f32, &[Category], usize); 6] = [
+    let scenes: [(&str, f32, &[Category], usize); 7] = [
+        // Generated (trigonometric_fans): rays 2^-50 beside an edge, exact edge signs.
+        ("trigonometric fans", 1.0, &Category::ALL, 100),
         ("teapot.obj", 1.0, &Category::ALL, 300),
         ("teapot.obj", 1e5, &Category::ALL, 300),
         ("cornell_box.obj", 1.0, &Category::ALL, 300),
@@ -559,11 +561,19 @@ fn stress_rays_gpu_equals_cpu_twin() {
         ("bunny.obj", 1.0, &far, 100),
     ];
     for (name, scale, categories, per_category) in scenes {
-        if common::fetched_scene(name).is_none() {
-            continue;
-        }
-        let (scene, tree, links) = scaled_scene(name, scale);
-        let triangles = &scene.triangles;
+        let (triangles, tree, links) = if name == "trigonometric fans" {
+            let triangles = trigonometric_fans(5, 64, 50, 5);
+            let tree = KdTree::build(&triangles, &BuildConfig::default());
+            let links = TreeLinks::new(&tree.nodes, tree.bounds);
+            (triangles, tree, links)
+        } else {
+            if common::fetched_scene(name).is_none() {
+                continue;
+            }
+            let (scene, tree, links) = scaled_scene(name, scale);
+            (scene.triangles, tree, links)
+        };
+        let triangles = &triangles;
         let tracer = common::load_scene(&mut tracer, &ctx, &tree, triangles);
         let rays: Vec<Ray> =
             categories.iter().flat_map(|&c| stress_rays(c, triangles, &tree, per_category, 3)).collect();
