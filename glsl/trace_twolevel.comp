@@ -160,7 +160,7 @@ bool front_facing(uint reference, vec3 d) {
     // products' magnitudes) cannot reach zero; else the exact sum.
     precise float dot_f32 = (nx * d.x + ny * d.y) + nz * d.z;
     precise float magnitude = (abs(nx * d.x) + abs(ny * d.y)) + abs(nz * d.z);
-    if (abs(dot_f32) > magnitude * (1.0 / 2097152.0) && magnitude > 7.88860905e-31) {  // 2^-21, 2^-100
+    if (abs(dot_f32) > magnitude * (1.0 / 2097152.0) && magnitude > ORIENT_ZERO) {  // 2^-21
         return dot_f32 < 0.0;
     }
     vec2 px = ff_two_prod(nx, d.x);

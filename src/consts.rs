@@ -15,6 +15,14 @@ pub const MAX_TRAVERSAL_STEPS: u32 = 16384;
 /// through the edge functions' products (`edge_error` in triangle.glsl); an edge
 /// function within its bound is redone exactly (float-float).
 pub const EDGE_GAMMA_LOG2: u32 = 19;
+/// The exact orientations (edge signs, plane sides; `orient_sign` in src/ff.rs)
+/// take vectors scaled to about 1 and count a determinant within
+/// `2^-ORIENT_ZERO_LOG2` of 0 as 0: far below every rounding the kernels make,
+/// above the error of terms a GPU without denormals flushes to 0. An edge
+/// function whose sign they correct takes that magnitude.
+pub const ORIENT_ZERO_LOG2: u32 = 100;
+/// `2^-ORIENT_ZERO_LOG2` (`ORIENT_ZERO` in ff.glsl).
+pub const ORIENT_ZERO: f32 = 1.0 / (1u128 << ORIENT_ZERO_LOG2) as f32;
 /// The traversals' split decisions and early exits are widened by
 /// `2^-TRAVERSAL_EPS_LOG2` relative (about 8 f32 ulps, more than the rounding of
 /// two ray/plane distances), so that rounding never skips a cell the ray enters
@@ -270,6 +278,7 @@ pub const SHADER_DEFINES: &[(&str, u32)] = &[
     ("MAX_TRAVERSAL_STEPS", MAX_TRAVERSAL_STEPS),
     ("MAX_SHORT_STACK", MAX_SHORT_STACK),
     ("EDGE_GAMMA_LOG2", EDGE_GAMMA_LOG2),
+    ("ORIENT_ZERO_LOG2", ORIENT_ZERO_LOG2),
     ("TRAVERSAL_EPS_LOG2", TRAVERSAL_EPS_LOG2),
     ("SHIFT_DIAGONALS", SHIFT_DIAGONALS),
     ("NODE_TAG_BITS", NODE_TAG_BITS),

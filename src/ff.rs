@@ -8,6 +8,8 @@
 //! device that flushes denormals may differ in the last bits of the far-ray
 //! paths, whose error bounds allow for the flushed terms; see ff.glsl).
 
+use crate::consts::ORIENT_ZERO;
+
 /// A float-float value `hi + lo`.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Ff {
@@ -159,18 +161,14 @@ pub fn exact_sum8(terms: [f32; 8]) -> Ff {
 /// vector (1 part for an f32 vector, 2 for float-float) × 2 parts.
 const ORIENT_TERMS: usize = 192;
 
-/// `2^-100`: a determinant of unit-scaled vectors at most this far from 0 counts
-/// as 0 (far below every rounding the kernels make; above the error of terms
-/// flushed to 0 on a GPU without denormals).
-const ORIENT_ZERO: f32 = 7.888_609e-31;
-
 /// The sign of `det[x, y, z] = z · (x × y)` for `x`, `y`, `z` exact float-float
 /// vectors, each scaled by a power of two so that its largest component lies
 /// in `[1, 2)`: -1, 0 or 1, exact unless the determinant lies within `2^-100`
 /// of 0 (then 0). The products of the parts (96 when `z` is an f32 vector, all
 /// its low parts 0; else 192) are exact (Dekker), and repeated error-free
 /// passes over them (Ogita, Rump & Oishi's VecSum) carry the sum to the last
-/// term until it outweighs the rest. Twin of `ff_orient_sign` in ff.glsl.
+/// term until it outweighs the rest (0 within [`ORIENT_ZERO`]). Twin of
+/// `ff_orient_sign` in ff.glsl.
 pub fn orient_sign(x: [Ff; 3], y: [Ff; 3], z: [Ff; 3]) -> i32 {
     let mut t = [0.0f32; ORIENT_TERMS];
     let mut n = 0;
@@ -227,6 +225,12 @@ mod tests {
         let m = bits as f32 / (1u32 << 24) as f32 - 0.5;
         let e = ((*seed >> 20) % 40) as i32 - 20;
         m * 2f32.powi(e)
+    }
+
+    #[test]
+    fn orient_zero_is_2_pow_minus_100() {
+        assert_eq!(ORIENT_ZERO, 2f32.powi(-100));
+        assert_eq!(ORIENT_ZERO.to_bits(), 7.888_609e-31f32.to_bits());
     }
 
     #[test]

@@ -175,9 +175,9 @@ pub const EDGE_GAMMA: f32 = 1.0 / (1u32 << crate::consts::EDGE_GAMMA_LOG2) as f3
 const ON_EDGE_GAMMA: f32 = 1.0 / 1_099_511_627_776.0;
 
 /// The magnitude an in-band edge function takes when [`edge_sign`] corrects its
-/// sign (2^-100: its barycentric weight is 0 to f32 precision). Twin of
-/// `ORIENT_TINY` in triangle.glsl.
-const ORIENT_TINY: f32 = 7.888_609e-31;
+/// sign ([`ORIENT_ZERO`](crate::consts::ORIENT_ZERO), 2^-100: its barycentric
+/// weight is 0 to f32 precision). Twin of `ORIENT_TINY` in triangle.glsl.
+const ORIENT_TINY: f32 = crate::consts::ORIENT_ZERO;
 
 /// The exponent `e` of `x = m·2^e`, `m` in `[1, 2)` (0 for `x = 0`). Twin of
 /// `exponent_of` in triangle.glsl.

@@ -131,6 +131,10 @@ vec2 ff_exact_sum8(float terms[8]) {
 // 2^-40 of an edge or an origin within rounding of the triangle's plane, and
 // its loops stay rolled ([[dont_unroll]]; includers enable
 // GL_EXT_control_flow_attributes). Twin: orient_sign in src/ff.rs.
+// 2^-ORIENT_ZERO_LOG2 (src/consts.rs): a determinant of unit-scaled vectors
+// within it of 0 counts as 0.
+const float ORIENT_ZERO = exp2(-float(ORIENT_ZERO_LOG2));
+
 int ff_orient_sign(vec2 x[3], vec2 y[3], vec2 z[3]) {
     float t[192];
     uint n = 0u;
@@ -171,7 +175,7 @@ int ff_orient_sign(vec2 x[3], vec2 y[3], vec2 z[3]) {
         precise float margin = rest * 1.0000152587890625;
         if (abs(s) > margin) return s > 0.0 ? 1 : -1;
         precise float total = abs(s) + rest;
-        if (total <= 7.888609052210118e-31) return 0;  // 2^-100
+        if (total <= ORIENT_ZERO) return 0;
     }
     return 0;
 }

@@ -145,8 +145,8 @@ bool on_edge_band(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
 }
 
 // The magnitude an in-band edge function takes when edge_sign_exact corrects
-// its sign (2^-100: its barycentric weight is 0 to f32 precision).
-const float ORIENT_TINY = 7.888609052210118e-31;
+// its sign (ORIENT_ZERO, 2^-100: its barycentric weight is 0 to f32 precision).
+const float ORIENT_TINY = ORIENT_ZERO;
 
 // The sign of the edge function of the edge p -> q for the ray from o along
 // dir: of det[p - o, q - o, dir], exact unless within 2^-100 of the three
