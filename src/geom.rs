@@ -205,12 +205,7 @@ fn pow2(k: i32) -> f32 {
 pub(crate) fn edge_sign(p: Vec3, q: Vec3, o: Vec3, dir: Vec3) -> i32 {
     let swap = p.x > q.x || (p.x == q.x && (p.y > q.y || (p.y == q.y && p.z > q.z)));
     let (f, g) = if swap { (q, p) } else { (p, q) };
-    let unit = |v: [Ff; 3]| {
-        let e = exponent_of(v[0].hi.abs().max(v[1].hi.abs()).max(v[2].hi.abs()));
-        v.map(|x| ff_ldexp(x, -e))
-    };
-    let x = unit([0, 1, 2].map(|i| Ff::diff(f[i], o[i])));
-    let y = unit([0, 1, 2].map(|i| Ff::diff(g[i], o[i])));
+    let (x, y) = (unit_offset(f, o), unit_offset(g, o));
     let ed = exponent_of(dir.x.abs().max(dir.y.abs()).max(dir.z.abs()));
     let d = [0, 1, 2].map(|i| Ff::from_f32(ldexp2(dir[i], -ed)));
     let s = orient_sign(x, y, d);
@@ -227,12 +222,16 @@ pub(crate) fn edge_sign(p: Vec3, q: Vec3, o: Vec3, dir: Vec3) -> i32 {
 /// exact unless within 2^-100 of the vectors' magnitudes (then 0, on the
 /// plane). Twin of `plane_side_exact` in triangle.glsl.
 pub(crate) fn plane_side(v0: Vec3, v1: Vec3, v2: Vec3, o: Vec3) -> i32 {
-    let unit = |v: Vec3| {
-        let x = [0, 1, 2].map(|i| Ff::diff(v[i], o[i]));
-        let e = exponent_of(x[0].hi.abs().max(x[1].hi.abs()).max(x[2].hi.abs()));
-        x.map(|c| ff_ldexp(c, -e))
-    };
-    orient_sign(unit(v0), unit(v1), unit(v2))
+    orient_sign(unit_offset(v0, o), unit_offset(v1, o), unit_offset(v2, o))
+}
+
+/// `v - o` exactly in float-float, scaled by the power of two that brings its
+/// largest component's high part to `[1, 2)`: the inputs of [`orient_sign`].
+/// Twin of `unit_offset` in triangle.glsl.
+fn unit_offset(v: Vec3, o: Vec3) -> [Ff; 3] {
+    let x = [0, 1, 2].map(|i| Ff::diff(v[i], o[i]));
+    let e = exponent_of(x[0].hi.abs().max(x[1].hi.abs()).max(x[2].hi.abs()));
+    x.map(|c| ff_ldexp(c, -e))
 }
 
 /// The sheared coordinate `(v - o)·dz - s·(v_z - o_z)` from offsets scaled by

@@ -148,6 +148,15 @@ bool on_edge_band(vec2 e, vec2 p, vec2 q, vec2 r, vec2 s) {
 // its sign (ORIENT_ZERO, 2^-100: its barycentric weight is 0 to f32 precision).
 const float ORIENT_TINY = ORIENT_ZERO;
 
+// v - o exactly in float-float, scaled by the power of two that brings its
+// largest component's high part to [1, 2): the inputs of ff_orient_sign.
+// Twin: unit_offset in src/geom.rs.
+void unit_offset(vec3 v, vec3 o, out vec2 x[3]) {
+    for (uint i = 0u; i < 3u; ++i) x[i] = ff_diff(v[i], o[i]);
+    int e = exponent_of(max(max(abs(x[0].x), abs(x[1].x)), abs(x[2].x)));
+    for (uint i = 0u; i < 3u; ++i) x[i] = ff_ldexp(x[i], -e);
+}
+
 // The sign of the edge function of the edge p -> q for the ray from o along
 // dir: of det[p - o, q - o, dir], exact unless within 2^-100 of the three
 // vectors' magnitudes (then 0: on the edge). The pair is taken in a fixed
@@ -158,17 +167,9 @@ int edge_sign_exact(vec3 p, vec3 q, vec3 o, vec3 dir) {
     vec3 f = swap ? q : p;
     vec3 g = swap ? p : q;
     vec2 x[3], y[3];
-    for (uint i = 0u; i < 3u; ++i) {
-        x[i] = ff_diff(f[i], o[i]);
-        y[i] = ff_diff(g[i], o[i]);
-    }
-    int ex = exponent_of(max(max(abs(x[0].x), abs(x[1].x)), abs(x[2].x)));
-    int ey = exponent_of(max(max(abs(y[0].x), abs(y[1].x)), abs(y[2].x)));
+    unit_offset(f, o, x);
+    unit_offset(g, o, y);
     int ed = exponent_of(max(max(abs(dir.x), abs(dir.y)), abs(dir.z)));
-    for (uint i = 0u; i < 3u; ++i) {
-        x[i] = ff_ldexp(x[i], -ex);
-        y[i] = ff_ldexp(y[i], -ey);
-    }
     vec2 d[3] = vec2[3](vec2(ldexp2(dir.x, -ed), 0.0), vec2(ldexp2(dir.y, -ed), 0.0), vec2(ldexp2(dir.z, -ed), 0.0));
     int s = ff_orient_sign(x, y, d);
     return swap ? -s : s;
@@ -183,11 +184,7 @@ int edge_sign_exact(vec3 p, vec3 q, vec3 o, vec3 dir) {
 int plane_side_exact(vec3 v0, vec3 v1, vec3 v2, vec3 o) {
     vec3 vs[3] = vec3[3](v0, v1, v2);
     vec2 x[3][3];
-    [[dont_unroll]] for (uint k = 0u; k < 3u; ++k) {
-        for (uint i = 0u; i < 3u; ++i) x[k][i] = ff_diff(vs[k][i], o[i]);
-        int e = exponent_of(max(max(abs(x[k][0].x), abs(x[k][1].x)), abs(x[k][2].x)));
-        for (uint i = 0u; i < 3u; ++i) x[k][i] = ff_ldexp(x[k][i], -e);
-    }
+    [[dont_unroll]] for (uint k = 0u; k < 3u; ++k) unit_offset(vs[k], o, x[k]);
     return ff_orient_sign(x[0], x[1], x[2]);
 }
 
