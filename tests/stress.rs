@@ -369,8 +369,7 @@ fn rays_leaving_a_vertex_hit_it_at_t_0() {
         assert!(rays.len() > 450, "{} rays", rays.len());
         let tree = KdTree::build(&triangles, &BuildConfig::default());
         let scene = SceneRef::new(&tree, &triangles);
-        drop(tracer.take());
-        let tracer = tracer.insert(Tracer::new(&ctx, &tree, &triangles).unwrap());
+        let tracer = common::load_scene(&mut tracer, &ctx, &tree, &triangles);
         let short_stack = Traversal::closest(Variant::ShortStack);
         let packets = Traversal { packet_width: 4, ..Traversal::closest(Variant::Stack) };
         for traversal in [Traversal::closest(Variant::Stack), short_stack, packets] {
