@@ -275,6 +275,19 @@ fn render_explains_what_it_skips_and_writes_exr() {
 }
 
 #[test]
+fn render_no_jitter_sends_every_sample_through_the_pixel_centre() {
+    let scene = scene_path("teapot.obj");
+    let out = temp("teapot-centres.png");
+    let args = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "32", "--height", "24"];
+    let o = kdtrace(&[&args[..], &["--spp", "2", "--no-jitter", "--explain"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2 per pixel, all through the pixel centres"), "{}", stderr(&o));
+    let o = kdtrace(&[&args[..], &["--spp", "2", "--explain"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("2 per pixel, jittered"), "{}", stderr(&o));
+}
+
+#[test]
 fn render_compare_measures_every_variant_against_one_converged_reference() {
     let scene = scene_path("cornell_box.obj");
     let out = temp("cornell-compare.png");

@@ -51,12 +51,17 @@ pub struct RenderArgs {
     /// Write a per-pixel cost heatmap instead of the shaded image: nodes | triangles.
     #[arg(long)]
     pub heatmap: Option<String>,
-    /// Samples per pixel (jittered by a seeded, Owen-scrambled Sobol sequence when > 1).
+    /// Samples per pixel (jittered by a seeded, Owen-scrambled Sobol sequence when > 1,
+    /// unless --no-jitter).
     #[arg(long, default_value_t = 1)]
     pub spp: u32,
     /// Seed of the sample sequence.
     #[arg(long, default_value_t = 0)]
     pub seed: u32,
+    /// Send every sample through the pixel centre instead of jittering it inside the
+    /// pixel: no anti-aliasing, each pixel the radiance seen through its centre.
+    #[arg(long)]
+    pub no_jitter: bool,
     /// Ray segments per path at most (camera ray, reflections, bounces).
     #[arg(long, default_value_t = 8)]
     pub max_depth: u32,
@@ -269,6 +274,7 @@ fn settings(args: &RenderArgs, scene: &Scene, traversal: Traversal, primary: Pri
     let mut settings = RenderSettings::new(args.width, args.height);
     settings.spp = args.spp;
     settings.seed = args.seed;
+    settings.jitter = !args.no_jitter;
     settings.max_depth = args.max_depth;
     settings.bounces = args.bounces;
     settings.ao_samples = args.ao;

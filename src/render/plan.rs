@@ -220,10 +220,16 @@ impl RenderPlan {
         } else {
             "shadow rays: none -> the any-hit pipeline is not compiled, no shadow queue, no resolve pass".into()
         });
-        explain.push(if settings.spp > 1 {
+        explain.push(if settings.spp > 1 && settings.jitter {
             format!(
                 "samples: {} per pixel, jittered by an Owen-scrambled Sobol sequence (seed {})",
                 settings.spp, settings.seed
+            )
+        } else if settings.spp > 1 {
+            format!(
+                "samples: {} per pixel, all through the pixel centres (--no-jitter: no anti-aliasing) -> jitter \
+                 skipped",
+                settings.spp
             )
         } else {
             "samples: 1 per pixel through the pixel centres -> jitter skipped".into()
@@ -251,7 +257,7 @@ impl RenderPlan {
             bounces: bounces || !skip,
             continue_paths: continue_paths || !skip,
             shadow_pass: shadow_pass || !skip,
-            jitter: settings.spp > 1,
+            jitter: settings.jitter && settings.spp > 1,
             raster: settings.primary == Primary::Raster,
             shadow_per_vertex: shadow_per_vertex.max(1),
             background: settings.background.unwrap_or(if headlight { Vec3::splat(0.05) } else { Vec3::ZERO }),

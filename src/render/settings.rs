@@ -24,7 +24,8 @@ pub struct RenderSettings {
     /// Image height in pixels.
     pub height: u32,
     /// Samples per pixel (1 = one ray through each pixel centre; more are
-    /// jittered by a seeded, Owen-scrambled Sobol sequence).
+    /// jittered by a seeded, Owen-scrambled Sobol sequence unless
+    /// [`jitter`](Self::jitter) is off).
     pub spp: u32,
     /// Ray segments per path at most (camera ray included).
     pub max_depth: u32,
@@ -53,6 +54,14 @@ pub struct RenderSettings {
     pub skip_unneeded: bool,
     /// How the camera rays' first hits are found.
     pub primary: Primary,
+    /// Jitter the camera rays inside their pixel when there is more than one
+    /// sample (default): the pixel value is the radiance averaged over the pixel's
+    /// square (anti-aliased edges). Off: every sample passes through the pixel
+    /// centre, so the pixel value is the radiance seen through that point (aliased
+    /// edges, as one sample gives), and an area light's penumbra is a 2D integral
+    /// over the lamp instead of a 4D one over pixel and lamp (docs/RENDERING.md,
+    /// "Light sampling").
+    pub jitter: bool,
     /// Keep the first hits of the first sample ([`RenderOutput::first_hits`](super::RenderOutput::first_hits)).
     pub keep_first_hits: bool,
     /// Write the first sample's rays to this folder, as ray files `kdtrace
@@ -93,6 +102,7 @@ impl RenderSettings {
             traversal: Traversal::closest(crate::traversal::Variant::Stack),
             skip_unneeded: true,
             primary: Primary::Trace,
+            jitter: true,
             keep_first_hits: false,
             save_rays: None,
         }
