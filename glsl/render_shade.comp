@@ -27,8 +27,11 @@ layout(constant_id = SHADE_SPEC_BOUNCES) const bool BOUNCES = true;       // --b
 layout(constant_id = SHADE_SPEC_CONTINUE) const bool CONTINUE = true;      // a next queue exists
 layout(constant_id = SHADE_SPEC_HEADLIGHT_SHADOWS) const bool HEADLIGHT_SHADOWS = false;  // trace the eye light's visibility (--no-skip)
 
-layout(std430, set = 0, binding = SHADE_BINDING_SURFACES) readonly buffer Surfaces { Surface surfaces[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_MATERIALS) readonly buffer Materials { Material materials[]; };
+// Surfaces and materials are read as texel buffers (three rgba32ui texels each):
+// lavapipe gathers a struct from a storage buffer one word and one lane at a
+// time, a texel 16 bytes at a time.
+layout(set = 0, binding = SHADE_BINDING_SURFACES, rgba32ui) uniform readonly uimageBuffer surface_texels;
+layout(set = 0, binding = SHADE_BINDING_MATERIALS, rgba32ui) uniform readonly uimageBuffer material_texels;
 layout(std430, set = 0, binding = SHADE_BINDING_EMITTERS) readonly buffer Emitters { Emitter emitters[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_LIGHTS) readonly buffer Lights { PointLight lights[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_RAYS_IN) readonly buffer RaysIn { Ray rays_in[]; };
@@ -43,6 +46,18 @@ layout(std430, set = 0, binding = SHADE_BINDING_COUNTERS) buffer Counters { uint
 layout(std430, set = 0, binding = SHADE_BINDING_ACCUM) buffer Accum { vec4 accum[]; };
 
 layout(push_constant) uniform Params { RenderParams p; };
+
+Surface load_surface(uint k) {
+    int b = int(k) * 3;
+    return Surface(uintBitsToFloat(imageLoad(surface_texels, b)), uintBitsToFloat(imageLoad(surface_texels, b + 1)),
+                   uintBitsToFloat(imageLoad(surface_texels, b + 2)));
+}
+
+Material load_material(uint k) {
+    int b = int(k) * 3;
+    return Material(uintBitsToFloat(imageLoad(material_texels, b)), uintBitsToFloat(imageLoad(material_texels, b + 1)),
+                    uintBitsToFloat(imageLoad(material_texels, b + 2)));
+}
 
 const float PI = 3.14159265358979;
 #define INF uintBitsToFloat(0x7f800000u)
@@ -119,7 +134,7 @@ void sample_area_light(Vertex v, Path path, float bounce_share, out vec3 weight,
     Emitter e = emitters[k];
     float lo = k == 0u ? 0.0 : emitters[k - 1u].cdf;
     float wx = clamp((w.x - lo) / max(e.cdf - lo, 1e-30), 0.0, uintBitsToFloat(0x3f7fffffu));
-    Surface es = surfaces[e.prim & EMITTER_PRIM_MASK];
+    Surface es = load_surface(e.prim & EMITTER_PRIM_MASK);
     vec3 y;
     if ((e.prim & EMITTER_PARALLELOGRAM) != 0u) {
         // A quad lamp: the square maps affinely onto the parallelogram spanned
@@ -143,7 +158,7 @@ void sample_area_light(Vertex v, Path path, float bounce_share, out vec3 weight,
     float cos_y = abs(dot(ny, wi));
     if (dist2 > 0.0 && cos_x > 0.0 && cos_y > 0.0 && e.pick > 0.0) {
         vec3 f = brdf(v, wi);
-        vec3 ke = materials[floatBitsToUint(es.v0.w)].ke.xyz;
+        vec3 ke = uintBitsToFloat(imageLoad(material_texels, int(floatBitsToUint(es.v0.w)) * 3 + 2).xyz);
         // The power heuristic against the diffuse bounce's cosine sampling,
         // when this vertex bounces (else the light sample takes it all).
         float p_light = e.pick / e.area * dist2 / cos_y;
@@ -192,9 +207,9 @@ void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool
 
 // The shading point of `hit` on its triangle for a path whose ray has direction `dir`.
 Vertex vertex_at(Hit hit, Path path, vec3 dir) {
-    Surface s = surfaces[hit.prim_id];
+    Surface s = load_surface(hit.prim_id);
     Vertex v;
-    v.m = materials[floatBitsToUint(s.v0.w)];
+    v.m = load_material(floatBitsToUint(s.v0.w));
     uint mat = floatBitsToUint(v.m.ks.w);
     v.wo = -normalize(dir);
     v.ng = normalize(cross(s.v1.xyz - s.v0.xyz, s.v2.xyz - s.v0.xyz));

@@ -127,6 +127,10 @@ impl Kernels {
                 push_constant_size: PUSH_CONSTANT_SIZE,
                 spec_constants: &shade_constants,
                 workgroup_size: RENDER_WORKGROUP_SIZE,
+                texel_buffers: &[
+                    (SHADE_BINDING_SURFACES, vk::Format::R32G32B32A32_UINT),
+                    (SHADE_BINDING_MATERIALS, vk::Format::R32G32B32A32_UINT),
+                ],
                 ..Default::default()
             },
         )?;
@@ -180,7 +184,9 @@ impl SceneBuffers {
                 surfaces.len()
             )));
         }
-        let surfaces = Buffer::with_data(ctx, bytemuck::cast_slice(&surfaces), storage, "surfaces")?;
+        // Storage buffers for the visibility kernel, texel buffers for the shade kernel.
+        let texels = storage | vk::BufferUsageFlags::STORAGE_TEXEL_BUFFER;
+        let surfaces = Buffer::with_data(ctx, bytemuck::cast_slice(&surfaces), texels, "surfaces")?;
         let materials: Vec<GpuMaterial> = scene
             .materials
             .iter()
@@ -190,7 +196,7 @@ impl SceneBuffers {
                 ke: [m.ke.x, m.ke.y, m.ke.z, 0.0],
             })
             .collect();
-        let materials = Buffer::with_data(ctx, bytemuck::cast_slice(&materials), storage, "materials")?;
+        let materials = Buffer::with_data(ctx, bytemuck::cast_slice(&materials), texels, "materials")?;
         let emitters = match (plan.emitters.is_empty(), plan.area_lights) {
             (false, _) => Buffer::with_data(ctx, bytemuck::cast_slice(&plan.emitters), storage, "emitters")?,
             (true, false) => unused(ctx)?,
