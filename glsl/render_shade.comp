@@ -34,12 +34,14 @@ layout(set = 0, binding = SHADE_BINDING_SURFACES, rgba32ui) uniform readonly uim
 layout(set = 0, binding = SHADE_BINDING_MATERIALS, rgba32ui) uniform readonly uimageBuffer material_texels;
 layout(std430, set = 0, binding = SHADE_BINDING_EMITTERS) readonly buffer Emitters { Emitter emitters[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_LIGHTS) readonly buffer Lights { PointLight lights[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_RAYS_IN) readonly buffer RaysIn { Ray rays_in[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_PATHS_IN) readonly buffer PathsIn { Path paths_in[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_HITS_IN) readonly buffer HitsIn { Hit hits_in[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_RAYS_NEXT) writeonly buffer RaysNext { Ray rays_next[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_PATHS_NEXT) writeonly buffer PathsNext { Path paths_next[]; };
-layout(std430, set = 0, binding = SHADE_BINDING_SHADOW_RAYS) writeonly buffer ShadowRays { Ray shadow_rays[]; };
+// Rays, paths and hits move as 16-byte words (a Ray or a Path is two, a Hit
+// one), for the same reason: one vector load or store per lane and word.
+layout(std430, set = 0, binding = SHADE_BINDING_RAYS_IN) readonly buffer RaysIn { uvec4 rays_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_PATHS_IN) readonly buffer PathsIn { uvec4 paths_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_HITS_IN) readonly buffer HitsIn { uvec4 hits_in[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_RAYS_NEXT) writeonly buffer RaysNext { uvec4 rays_next[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_PATHS_NEXT) writeonly buffer PathsNext { uvec4 paths_next[]; };
+layout(std430, set = 0, binding = SHADE_BINDING_SHADOW_RAYS) writeonly buffer ShadowRays { uvec4 shadow_rays[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_SHADOW_WEIGHTS) writeonly buffer ShadowWeights { vec4 shadow_weights[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_SPANS) writeonly buffer Spans { uvec2 spans[]; };
 layout(std430, set = 0, binding = SHADE_BINDING_COUNTERS) buffer Counters { uint counters[]; };
@@ -57,6 +59,29 @@ Material load_material(uint k) {
     int b = int(k) * 3;
     return Material(uintBitsToFloat(imageLoad(material_texels, b)), uintBitsToFloat(imageLoad(material_texels, b + 1)),
                     uintBitsToFloat(imageLoad(material_texels, b + 2)));
+}
+
+// The direction of the ray in slot i of the input queue.
+vec3 ray_in_dir(uint i) { return uintBitsToFloat(rays_in[2u * i + 1u].xyz); }
+
+Path load_path(uint i) {
+    uvec4 a = paths_in[2u * i];
+    uvec4 b = paths_in[2u * i + 1u];
+    return Path(uintBitsToFloat(a.xyz), a.w, b.x, b.y, b.z, b.w);
+}
+
+void store_path(uint i, Path q) {
+    paths_next[2u * i] = uvec4(floatBitsToUint(q.throughput), q.pixel);
+    paths_next[2u * i + 1u] = uvec4(q.flags, q.depth, q.diffuse, q.pad);
+}
+
+// The words of the ray from `origin` along `dir` over [0, tmax].
+uvec4 ray_word0(vec3 origin) { return uvec4(floatBitsToUint(origin), 0u); }
+uvec4 ray_word1(vec3 dir, float tmax) { return uvec4(floatBitsToUint(dir), floatBitsToUint(tmax)); }
+
+void store_shadow_ray(uint k, vec3 origin, vec3 dir) {
+    shadow_rays[2u * k] = ray_word0(origin);
+    shadow_rays[2u * k + 1u] = ray_word1(dir, 1.0);
 }
 
 const float PI = 3.14159265358979;
@@ -200,8 +225,9 @@ void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool
         uint slot = atomicAdd(counters[block + RC_NEXT], 1u);
         // Grow the next wave's indirect dispatch by a workgroup when one begins.
         if (slot % RENDER_WORKGROUP_SIZE == 0u) atomicAdd(counters[block + RC_ARGS], 1u);
-        rays_next[slot] = Ray(v.origin, 0.0, dir, INF);
-        paths_next[slot] = next;
+        rays_next[2u * slot] = ray_word0(v.origin);
+        rays_next[2u * slot + 1u] = ray_word1(dir, INF);
+        store_path(slot, next);
     }
 }
 
@@ -233,7 +259,7 @@ void write_shadow_rays(uint first, Vertex v, Path path, vec3 area_weight, vec3 a
                        vec3 head, bool gather_ao) {
     uint k = first;
     if (luminance(area_weight) > 0.0) {
-        shadow_rays[k] = Ray(v.origin, 0.0, area_target - v.origin, 1.0);
+        store_shadow_ray(k, v.origin, area_target - v.origin);
         shadow_weights[k] = vec4(area_weight, 0.0);
         k++;
     }
@@ -244,13 +270,13 @@ void write_shadow_rays(uint first, Vertex v, Path path, vec3 area_weight, vec3 a
             float dist2 = dot(d, d);
             vec3 wi = d * inversesqrt(dist2);
             vec3 f = brdf(v, wi);
-            shadow_rays[k] = Ray(v.origin, 0.0, lights[l].position.xyz - v.origin, 1.0);
+            store_shadow_ray(k, v.origin, lights[l].position.xyz - v.origin);
             shadow_weights[k] = vec4(v.thr * f * lights[l].intensity.xyz * (dot(v.n, wi) / dist2), 0.0);
             k++;
         }
     }
     if (head_ray) {
-        shadow_rays[k] = Ray(v.origin, 0.0, p.eye.xyz - v.origin, 1.0);
+        store_shadow_ray(k, v.origin, p.eye.xyz - v.origin);
         shadow_weights[k] = vec4(head, 0.0);
         k++;
     }
@@ -258,7 +284,7 @@ void write_shadow_rays(uint first, Vertex v, Path path, vec3 area_weight, vec3 a
         vec3 weight = v.thr * v.m.kd.xyz * (p.background.w / float(p.ao_samples));
         for (uint a = 0u; a < p.ao_samples; a++) {
             vec2 u = ld2(path.pixel, p.sample_index * p.ao_samples + a, v.base + 3u, p.seed);
-            shadow_rays[k] = Ray(v.origin, 0.0, cosine_direction(v.n, u) * p.ao_radius, 1.0);
+            store_shadow_ray(k, v.origin, cosine_direction(v.n, u) * p.ao_radius);
             shadow_weights[k] = vec4(weight, 0.0);
             k++;
         }
@@ -269,8 +295,9 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     uint block = wave_block(p.count);
     if (i >= WAVE_PATHS(p.count, block)) return;
-    Path path = paths_in[i];
-    Hit hit = hits_in[i];
+    Path path = load_path(i);
+    uvec4 h = hits_in[i];
+    Hit hit = Hit(uintBitsToFloat(h.x), h.y, uintBitsToFloat(h.z), uintBitsToFloat(h.w));
     spans[i] = uvec2(0u);
 
     if (hit.prim_id >= PRIM_INCOMPLETE) {
@@ -283,7 +310,7 @@ void main() {
         return;
     }
 
-    Vertex v = vertex_at(hit, path, rays_in[i].dir);
+    Vertex v = vertex_at(hit, path, ray_in_dir(i));
     uint mat = floatBitsToUint(v.m.ks.w);
 
     // How the path goes on from here: a mirror reflection with probability
@@ -299,7 +326,7 @@ void main() {
     float bounce_share = can_bounce ? 1.0 - p_mirror : 0.0;
 
     vec3 L = vec3(0.0);
-    if ((mat & MAT_EMISSIVE) != 0u) L += emission(v, path, hit.t, length(rays_in[i].dir));
+    if ((mat & MAT_EMISSIVE) != 0u) L += emission(v, path, hit.t, length(ray_in_dir(i)));
     // The eye light shades without shadows. At a camera hit the camera ray
     // proves the eye sees v.x; HEADLIGHT_SHADOWS traces that visibility anyway
     // (--no-skip), to measure what skipping it saves.
