@@ -275,16 +275,17 @@ fn render_explains_what_it_skips_and_writes_exr() {
 }
 
 #[test]
-fn render_no_jitter_sends_every_sample_through_the_pixel_centre() {
+fn render_no_jitter_and_samples_per_submission() {
     let scene = scene_path("teapot.obj");
     let out = temp("teapot-centres.png");
     let args = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "--width", "32", "--height", "24"];
     let o = kdtrace(&[&args[..], &["--spp", "2", "--no-jitter", "--explain"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("2 per pixel, all through the pixel centres"), "{}", stderr(&o));
-    let o = kdtrace(&[&args[..], &["--spp", "2", "--explain"]].concat());
+    let o = kdtrace(&[&args[..], &["--spp", "2", "--explain", "--samples-per-submission", "1"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("2 per pixel, jittered"), "{}", stderr(&o));
+    assert!(stderr(&o).contains(", 2 submits"), "{}", stderr(&o));
 }
 
 #[test]

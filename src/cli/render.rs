@@ -62,6 +62,10 @@ pub struct RenderArgs {
     /// pixel: no anti-aliasing, each pixel the radiance seen through its centre.
     #[arg(long)]
     pub no_jitter: bool,
+    /// Samples recorded into one GPU submission (0: automatic, about 2^18 paths per
+    /// submission, at most 64 samples); the image does not depend on it.
+    #[arg(long, default_value_t = 0)]
+    pub samples_per_submission: u32,
     /// Ray segments per path at most (camera ray, reflections, bounces).
     #[arg(long, default_value_t = 8)]
     pub max_depth: u32,
@@ -275,6 +279,7 @@ fn settings(args: &RenderArgs, scene: &Scene, traversal: Traversal, primary: Pri
     settings.spp = args.spp;
     settings.seed = args.seed;
     settings.jitter = !args.no_jitter;
+    settings.samples_per_submission = args.samples_per_submission;
     settings.max_depth = args.max_depth;
     settings.bounces = args.bounces;
     settings.ao_samples = args.ao;

@@ -585,7 +585,19 @@ impl Timestamps {
 
     /// Seconds between timestamps `a` and `b` of a completed submission.
     pub fn seconds_between(&self, a: u32, b: u32) -> Result<f64> {
-        let mut data = vec![0u64; self.count as usize];
+        let ticks = self.ticks(self.count)?;
+        Ok(self.seconds(&ticks, a, b))
+    }
+
+    /// Seconds between timestamps `a` and `b` of `ticks` (from [`Timestamps::ticks`]).
+    pub fn seconds(&self, ticks: &[u64], a: u32, b: u32) -> f64 {
+        ticks[b as usize].wrapping_sub(ticks[a as usize]) as f64 * self.period_ns * 1e-9
+    }
+
+    /// The first `count` timestamps, in ticks, of a completed submission that
+    /// wrote them all.
+    pub fn ticks(&self, count: u32) -> Result<Vec<u64>> {
+        let mut data = vec![0u64; count.min(self.count) as usize];
         // SAFETY: the pool has `count` queries, and the caller waited for completion.
         unsafe {
             self.ctx
@@ -598,8 +610,7 @@ impl Timestamps {
                 )
                 .vk("vkGetQueryPoolResults")?;
         }
-        let ticks = data[b as usize].wrapping_sub(data[a as usize]);
-        Ok(ticks as f64 * self.period_ns * 1e-9)
+        Ok(data)
     }
 }
 

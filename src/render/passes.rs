@@ -28,11 +28,13 @@ pub(super) fn timestamp_pairs(waves: u32) -> u32 {
     4 + 4 * waves + 2
 }
 
-/// One submission's dispatches, each between a barrier and a pair of timestamps.
+/// One sample's dispatches in a submission, each between a barrier and a pair
+/// of timestamps (its `pairs` pairs from query `base` on).
 pub(super) struct Pass<'a> {
     ctx: &'a GpuContext,
     timestamps: Option<&'a Timestamps>,
     pairs: u32,
+    base: u32,
     kinds: Vec<Kind>,
     error: Option<Error>,
 }
@@ -53,14 +55,15 @@ pub(super) enum Kind {
 pub(super) type KindTimes = [f64; 7];
 
 impl<'a> Pass<'a> {
-    fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>, pairs: u32) -> Self {
-        Pass { ctx, timestamps, pairs, kinds: Vec::new(), error: None }
+    /// The pass of the `k`-th sample of a submission.
+    fn new(ctx: &'a GpuContext, timestamps: Option<&'a Timestamps>, pairs: u32, k: u32) -> Self {
+        Pass { ctx, timestamps, pairs, base: 2 * pairs * k, kinds: Vec::new(), error: None }
     }
 
-    /// Resets the timestamps; with `counters`, sets the render counters to
-    /// `reset` (a sample's start).
+    /// Resets the timestamps (in a submission's first pass); with `counters`,
+    /// sets the render counters to `reset` (a sample's start).
     unsafe fn begin(&mut self, cmd: vk::CommandBuffer, counters: Option<(&Buffer, &[u32])>) {
-        if let Some(t) = self.timestamps {
+        if let Some(t) = self.timestamps.filter(|_| self.base == 0) {
             t.record_reset(cmd);
         }
         if let Some((buffer, reset)) = counters {
@@ -72,11 +75,11 @@ impl<'a> Pass<'a> {
     unsafe fn timed(&mut self, cmd: vk::CommandBuffer, kind: Kind, record: impl FnOnce()) {
         let index = self.kinds.len() as u32;
         if let Some(t) = self.timestamps.filter(|_| index < self.pairs) {
-            t.record(cmd, 2 * index);
+            t.record(cmd, self.base + 2 * index);
         }
         record();
         if let Some(t) = self.timestamps.filter(|_| index < self.pairs) {
-            t.record(cmd, 2 * index + 1);
+            t.record(cmd, self.base + 2 * index + 1);
         }
         self.kinds.push(kind);
         compute_barrier(self.ctx, cmd);
@@ -102,20 +105,22 @@ impl<'a> Pass<'a> {
         // Every query must be written before the results can be read with WAIT.
         if let Some(t) = self.timestamps {
             for index in 2 * self.kinds.len().min(self.pairs as usize) as u32..2 * self.pairs {
-                t.record(cmd, index);
+                t.record(cmd, self.base + index);
             }
         }
         self.ctx.record_host_read_barrier(cmd);
     }
 
-    /// After the submission completed: adds its GPU times.
-    fn finish(self, times: &mut KindTimes) -> Result<()> {
+    /// After the submission completed: adds its GPU times (`ticks`: the
+    /// submission's timestamps).
+    fn finish(self, ticks: Option<&[u64]>, times: &mut KindTimes) -> Result<()> {
         if let Some(e) = self.error {
             return Err(e);
         }
-        if let Some(t) = self.timestamps {
+        if let (Some(t), Some(ticks)) = (self.timestamps, ticks) {
             for (i, &kind) in self.kinds.iter().enumerate().take(self.pairs as usize) {
-                times[kind as usize] += t.seconds_between(2 * i as u32, 2 * i as u32 + 1)?;
+                let a = self.base + 2 * i as u32;
+                times[kind as usize] += t.seconds(ticks, a, a + 1);
             }
         }
         Ok(())
@@ -211,58 +216,111 @@ impl SavedRays {
 }
 
 impl Frame<'_> {
-    /// One sample of a chunk: one submission, or with `save_rays` in the first
-    /// sample one per wave (the rays are saved between them). Then the
-    /// statistics from the counters. `jitter` is the sample's one jitter of
-    /// rasterized first hits, `near` the rasterizer's near plane.
-    pub(super) fn sample(
+    /// Samples `first_sample ..` of a chunk, one per jitter of `jitters` (the
+    /// sample's one jitter of rasterized first hits, its jitter in the pixel
+    /// otherwise): one submission, each sample's counters copied aside after
+    /// it; or, with `save_rays` in the first sample (alone then), one
+    /// submission per wave, the rays saved between them. Then the statistics
+    /// from the counters. `near` is the rasterizer's near plane.
+    pub(super) fn samples(
         &mut self,
         camera: &Camera,
-        sample: u32,
+        first_sample: u32,
+        jitters: &[[f32; 2]],
         first_pixel: u64,
         chunk_pixels: u32,
-        jitter: [f32; 2],
         near: f32,
     ) -> Result<()> {
         let (ctx, res) = (self.ctx, self.res);
         let waves = res.sizes.waves;
         let pairs = timestamp_pairs(waves);
         let reset = counters_reset(waves);
-        let split = self.save_rays.filter(|_| sample == 0);
-        // Wave 0 is the camera rays; step w (1..=waves) traces the shadow rays
-        // of wave w - 1, resolves them, traces the rays it appended and shades
-        // them as wave w (the last step only the shadow rays).
-        let steps: Vec<Vec<u32>> = match split {
-            None => vec![(0..=waves).collect()],
-            Some(_) => (0..=waves).map(|w| vec![w]).collect(),
-        };
-        for group in steps {
-            let mut pass = Pass::new(ctx, res.timestamps.as_ref(), pairs);
-            let first = group[0] == 0;
-            // SAFETY: the resources outlive the render's submissions, each of which
-            // completes before the next.
-            unsafe {
-                ctx.submit_and_wait(|cmd| {
-                    pass.begin(cmd, first.then_some((&res.queues.counters, &reset[..])));
-                    for &w in &group {
+        let count = jitters.len() as u32;
+        if count == 0 || count > res.sizes.batch {
+            return Err(Error::InvalidInput(format!(
+                "internal: {count} samples in one submission (at most {})",
+                res.sizes.batch
+            )));
+        }
+        if let Some(dir) = self.save_rays.filter(|_| first_sample == 0) {
+            if count != 1 {
+                return Err(Error::InvalidInput("internal: the rays of a batch of samples cannot be saved".into()));
+            }
+            self.set_sample(0, jitters[0]);
+            for w in 0..=waves {
+                let mut pass = Pass::new(ctx, res.timestamps.as_ref(), pairs, 0);
+                // SAFETY: the resources outlive the render's submissions, each of
+                // which completes before the next.
+                unsafe {
+                    ctx.submit_and_wait(|cmd| {
+                        pass.begin(cmd, (w == 0).then_some((&res.queues.counters, &reset[..])));
                         match w {
-                            0 => self.record_camera_wave(&mut pass, cmd, camera, sample, chunk_pixels, jitter, near),
+                            0 => self.record_camera_wave(&mut pass, cmd, camera, 0, chunk_pixels, jitters[0], near),
                             w => self.record_wave(&mut pass, cmd, w, chunk_pixels),
                         }
-                    }
-                    pass.end(cmd);
-                })?;
-            }
-            pass.finish(&mut self.times)?;
-            self.stats.submits += 1;
-            if let Some(dir) = split {
-                let w = group[0];
+                        pass.end(cmd);
+                    })?;
+                }
+                let ticks = res.timestamps.as_ref().map(|t| t.ticks(2 * pairs)).transpose()?;
+                pass.finish(ticks.as_deref(), &mut self.times)?;
+                self.stats.submits += 1;
                 let counters = read_counters(&res.queues.counters, waves)?;
                 self.save_wave_rays(dir, w, chunk_pixels, &counters)?;
             }
+            let counters = read_counters(&res.queues.counters, waves)?;
+            return self.count_sample(&counters, 0, first_pixel, chunk_pixels);
         }
+        let block_bytes = u64::from(waves * RC_STRIDE) * COUNTER_BYTES;
+        let mut passes = Vec::with_capacity(count as usize);
+        // SAFETY: as above.
+        unsafe {
+            ctx.submit_and_wait(|cmd| {
+                for (k, &jitter) in jitters.iter().enumerate() {
+                    let sample = first_sample + k as u32;
+                    self.set_sample(sample, jitter);
+                    let mut pass = Pass::new(ctx, res.timestamps.as_ref(), pairs, k as u32);
+                    pass.begin(cmd, Some((&res.queues.counters, &reset[..])));
+                    self.record_camera_wave(&mut pass, cmd, camera, sample, chunk_pixels, jitter, near);
+                    for w in 1..=waves {
+                        self.record_wave(&mut pass, cmd, w, chunk_pixels);
+                    }
+                    pass.end(cmd);
+                    // The sample's counters, aside; the barrier orders this read
+                    // before the next sample's reset.
+                    let region =
+                        [vk::BufferCopy { src_offset: 0, dst_offset: k as u64 * block_bytes, size: block_bytes }];
+                    ctx.device.cmd_copy_buffer(cmd, res.queues.counters.buffer, res.queues.counter_log.buffer, &region);
+                    compute_barrier(ctx, cmd);
+                    passes.push(pass);
+                }
+                ctx.record_host_read_barrier(cmd);
+            })?;
+        }
+        let ticks = res.timestamps.as_ref().map(|t| t.ticks(2 * pairs * count)).transpose()?;
+        for pass in passes {
+            pass.finish(ticks.as_deref(), &mut self.times)?;
+        }
+        self.stats.submits += 1;
+        let log = read_counters(&res.queues.counter_log, count * waves)?;
+        for (k, counters) in log.chunks_exact((waves * RC_STRIDE) as usize).enumerate() {
+            self.count_sample(counters, first_sample + k as u32, first_pixel, chunk_pixels)?;
+        }
+        Ok(())
+    }
+
+    /// The push constants' sample and jitter (`right.w`, `up.w`: the jitter the
+    /// rasterizer's projection took, which the camera rays then take too).
+    fn set_sample(&mut self, sample: u32, jitter: [f32; 2]) {
+        self.params.sample_index = sample;
+        self.params.right[3] = jitter[0];
+        self.params.up[3] = jitter[1];
+    }
+
+    /// Adds one sample's counters (`waves` blocks) to the statistics; after
+    /// the first sample, the first hits when asked for.
+    fn count_sample(&mut self, counters: &[u32], sample: u32, first_pixel: u64, chunk_pixels: u32) -> Result<()> {
+        let res = self.res;
         self.stats.camera_rays += u64::from(chunk_pixels);
-        let counters = read_counters(&res.queues.counters, waves)?;
         let total =
             |index: u32| counters.chunks_exact(RC_STRIDE as usize).map(|b| u64::from(b[index as usize])).sum::<u64>();
         let overflow = total(RC_OVERFLOW);

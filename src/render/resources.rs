@@ -48,6 +48,9 @@ impl Queue {
     }
 }
 
+/// Samples one submission records at most.
+const MAX_SAMPLES_PER_SUBMISSION: u64 = 64;
+
 /// How the image is cut into chunks of pixels, each traced through the queues
 /// in one go.
 #[derive(Clone, Copy)]
@@ -61,6 +64,9 @@ pub(super) struct Chunking {
     /// Waves of shading per sample (the camera rays' and those of the paths
     /// they continue into): `max_depth` when paths continue, else 1.
     pub(super) waves: u32,
+    /// Samples one submission records at most
+    /// ([`RenderSettings::samples_per_submission`]).
+    pub(super) batch: u32,
 }
 
 impl Chunking {
@@ -85,7 +91,15 @@ impl Chunking {
             .min(limit / (largest * shadow_per_path))
             .max(1);
         let waves = if plan.continue_paths { settings.max_depth } else { 1 };
-        Ok(Chunking { pixel_count, chunk, shadow_capacity: chunk * shadow_per_path, waves })
+        let batch = match settings.samples_per_submission {
+            // Several chunks, or a visibility buffer drawn per sample (its render
+            // pass is not ordered against the next sample's in one submission).
+            _ if chunk < pixel_count || plan.raster => 1,
+            0 => (1u64 << 18).div_ceil(chunk).min(MAX_SAMPLES_PER_SUBMISSION) as u32,
+            n => n.min(MAX_SAMPLES_PER_SUBMISSION as u32),
+        };
+        let batch = batch.clamp(1, settings.spp);
+        Ok(Chunking { pixel_count, chunk, shadow_capacity: chunk * shadow_per_path, waves, batch })
     }
 }
 
@@ -235,6 +249,8 @@ pub(super) struct Queues {
     pub(super) spans: Buffer,
     pub(super) shadow: Option<Queue>,
     pub(super) counters: Buffer,
+    /// The counters of each sample of a submission, copied after the sample.
+    pub(super) counter_log: Buffer,
     /// Per pixel: the sum of its samples' radiance (xyz) and its bad rays (w).
     pub(super) accum: Buffer,
     pub(super) readback: Buffer,
@@ -246,7 +262,7 @@ impl Queues {
     /// `host`: the ray queues are host-visible (`save_rays`).
     fn new(ctx: &Ctx, plan: &RenderPlan, sizes: Chunking, host: bool) -> Result<Queues> {
         let storage = vk::BufferUsageFlags::STORAGE_BUFFER;
-        let Chunking { pixel_count, chunk, shadow_capacity, waves } = sizes;
+        let Chunking { pixel_count, chunk, shadow_capacity, waves, batch } = sizes;
         let a = Queue::new(ctx, chunk, "queue A", host)?;
         let b = if plan.continue_paths { Some(Queue::new(ctx, chunk, "queue B", host)?) } else { None };
         let spans = Buffer::new(ctx, chunk * SPAN_BYTES, storage, MemoryLocation::GpuOnly, "shadow spans")?;
@@ -254,9 +270,19 @@ impl Queues {
         let counters = Buffer::new(
             ctx,
             u64::from(waves * RC_STRIDE) * COUNTER_BYTES,
-            storage | vk::BufferUsageFlags::TRANSFER_DST | vk::BufferUsageFlags::INDIRECT_BUFFER,
+            storage
+                | vk::BufferUsageFlags::TRANSFER_DST
+                | vk::BufferUsageFlags::TRANSFER_SRC
+                | vk::BufferUsageFlags::INDIRECT_BUFFER,
             MemoryLocation::GpuToCpu,
             "render counters",
+        )?;
+        let counter_log = Buffer::new(
+            ctx,
+            u64::from(batch * waves * RC_STRIDE) * COUNTER_BYTES,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+            "render counters per sample",
         )?;
         let accum = Buffer::new(
             ctx,
@@ -273,7 +299,7 @@ impl Queues {
             "image",
         )?;
         let dummy = unused(ctx)?;
-        Ok(Queues { a, b, spans, shadow, counters, accum, readback, dummy })
+        Ok(Queues { a, b, spans, shadow, counters, counter_log, accum, readback, dummy })
     }
 
     /// Queue B, or A when paths do not continue (its sets are then never used).
@@ -504,7 +530,7 @@ impl Resources {
             )?),
             false => None,
         };
-        let timestamps = Timestamps::new(&ctx, 2 * timestamp_pairs(sizes.waves))?;
+        let timestamps = Timestamps::new(&ctx, 2 * timestamp_pairs(sizes.waves) * sizes.batch)?;
         Ok(Resources { trace_sets, shadow_sets, raster, timestamps, hit_readback, sets, queues, data, kernels, sizes })
     }
 }

@@ -62,6 +62,12 @@ pub struct RenderSettings {
     /// over the lamp instead of a 4D one over pixel and lamp (docs/RENDERING.md,
     /// "Light sampling").
     pub jitter: bool,
+    /// Samples recorded into one submission (0: automatic, enough for about
+    /// 2^18 paths per submission, at most 64; one when the image renders in
+    /// chunks or its first hits are rasterized). Each submission costs a host round trip; the images do not
+    /// depend on it. Checkpoints and `save_rays` end a submission where they
+    /// need the results.
+    pub samples_per_submission: u32,
     /// Keep the first hits of the first sample ([`RenderOutput::first_hits`](super::RenderOutput::first_hits)).
     pub keep_first_hits: bool,
     /// Write the first sample's rays to this folder, as ray files `kdtrace
@@ -103,6 +109,7 @@ impl RenderSettings {
             skip_unneeded: true,
             primary: Primary::Trace,
             jitter: true,
+            samples_per_submission: 0,
             keep_first_hits: false,
             save_rays: None,
         }

@@ -111,21 +111,30 @@ pub fn render_progressive(
         let first_pixel = c * chunk;
         let chunk_pixels = (pixel_count - first_pixel).min(chunk) as u32;
         frame.params.eye[3] = f32::from_bits(first_pixel as u32);
-        for sample in 0..settings.spp {
-            frame.params.sample_index = sample;
+        let mut sample = 0;
+        while sample < settings.spp {
+            // Up to `batch` samples per submission, ending at checkpoints; the
+            // first alone when its rays are saved wave by wave.
+            let mut count = res.sizes.batch.min(settings.spp - sample);
+            if sample == 0 && settings.save_rays.is_some() {
+                count = 1;
+            }
+            if every > 0 && chunks == 1 {
+                count = count.min(every - sample % every);
+            }
             // One jitter per sample for the whole image when first hits are
             // rasterized: computed here once, for the projection and the camera rays.
-            let jitter = if plan.jitter { ld2(0, sample, 0, settings.seed) } else { [0.5, 0.5] };
-            frame.params.right[3] = jitter[0];
-            frame.params.up[3] = jitter[1];
-            frame.sample(camera, sample, first_pixel, chunk_pixels, jitter, near)?;
-            done += 1;
+            let jitters: Vec<[f32; 2]> = (sample..sample + count)
+                .map(|s| if plan.jitter { ld2(0, s, 0, settings.seed) } else { [0.5, 0.5] })
+                .collect();
+            frame.samples(camera, sample, &jitters, first_pixel, chunk_pixels, near)?;
+            done += u64::from(count);
             progress(done, total);
-            let samples = sample + 1;
-            if every > 0 && chunks == 1 && samples % every == 0 && samples < settings.spp {
+            sample += count;
+            if every > 0 && chunks == 1 && sample % every == 0 && sample < settings.spp {
                 frame.copy_image()?;
-                let (partial, _) = read_image(&res.queues.readback, pixel_count, samples)?;
-                checkpoint(samples, &partial)?;
+                let (partial, _) = read_image(&res.queues.readback, pixel_count, sample)?;
+                checkpoint(sample, &partial)?;
             }
         }
     }
