@@ -420,6 +420,32 @@ fn samples_batched_into_one_submission_give_the_same_image() {
     }
 }
 
+#[test]
+fn without_mirrors_the_waves_after_the_last_bounce_are_not_recorded() {
+    // The teapot has no mirror: a path continues only by diffuse bounces, so
+    // with two of them the render records three waves per sample, not
+    // `max_depth` (8). Against `--no-skip` (every feature compiled in, all 8
+    // waves): the same rays traced and the same image up to the order of
+    // additions.
+    let scene = Scene::load(&common::scene_path("teapot.obj")).unwrap();
+    let camera = Camera::from_cameras_json(&common::scene_path("cameras.json"), "teapot").unwrap().unwrap();
+    let mut settings = RenderSettings::new(48, 36);
+    settings.spp = 2;
+    settings.bounces = 2;
+    settings.lights = vec![PointLight { position: Vec3::new(0.0, 1000.0, 0.0), intensity: Vec3::splat(1e6) }];
+    let skipped = render_scene(&scene, &camera, &settings);
+    settings.skip_unneeded = false;
+    let full = render_scene(&scene, &camera, &settings);
+    assert!(!skipped.plan.mirrors && full.plan.mirrors && skipped.plan.continue_paths);
+    assert!(skipped.plan.explain().iter().any(|l| l.contains("3 waves per sample")), "{:?}", skipped.plan.explain());
+    let rays = |o: &RenderOutput| (o.stats.camera_rays, o.stats.secondary_rays, o.stats.shadow_rays);
+    assert_eq!(rays(&skipped), rays(&full));
+    assert!(skipped.stats.secondary_rays > 200, "{} secondary rays", skipped.stats.secondary_rays);
+    let differ =
+        skipped.pixels.iter().zip(&full.pixels).filter(|(a, b)| (**a - **b).abs().max_element() > 1e-5).count();
+    assert_eq!(differ, 0, "{differ} pixels differ between 3 and 8 waves");
+}
+
 /// Bounds of the Cornell reference check. Measured (128 samples, seeds 1, 2, 3,
 /// traced and rasterized first hits, `KDTRACE_TEST_SEED=N cargo test --test render
 /// the_cornell_box -- --nocapture`): channel mean bias 0.08–0.46 %, block RMSE

@@ -201,7 +201,18 @@ impl RenderPlan {
             "diffuse bounces: off (--bounces 0) -> skipped".into()
         });
         explain.push(if continue_paths {
-            format!("paths continue past the first hit (up to {} segments): second ray queue on", settings.max_depth)
+            match mirrors || !skip {
+                true => format!(
+                    "paths continue past the first hit (up to {} segments): second ray queue on",
+                    settings.max_depth
+                ),
+                false => format!(
+                    "paths continue past the first hit by diffuse bounces only (up to {} segments, no mirrors): second \
+                     ray queue on, {} waves per sample",
+                    settings.max_depth.min(settings.bounces + 1),
+                    settings.max_depth.min(settings.bounces + 1)
+                ),
+            }
         } else {
             "paths end at their first hit (no mirrors, no bounces): second ray queue and its passes skipped".into()
         });
