@@ -13,6 +13,7 @@
 #extension GL_EXT_control_flow_attributes : require
 
 #include "ray.glsl"
+#include "ray_checks.glsl"
 #include "render.glsl"
 
 layout(local_size_x = RENDER_WORKGROUP_SIZE) in;
@@ -62,7 +63,7 @@ Material load_material(uint k) {
 }
 
 // The direction of the ray in slot i of the input queue.
-vec3 ray_in_dir(uint i) { return uintBitsToFloat(rays_in[2u * i + 1u].xyz); }
+vec3 ray_in_dir(uint i) { return ray_from_words(rays_in[2u * i], rays_in[2u * i + 1u]).dir; }
 
 Path load_path(uint i) {
     uvec4 a = paths_in[2u * i];
@@ -75,13 +76,11 @@ void store_path(uint i, Path q) {
     paths_next[2u * i + 1u] = uvec4(q.flags, q.depth, q.diffuse, q.pad);
 }
 
-// The words of the ray from `origin` along `dir` over [0, tmax].
-uvec4 ray_word0(vec3 origin) { return uvec4(floatBitsToUint(origin), 0u); }
-uvec4 ray_word1(vec3 dir, float tmax) { return uvec4(floatBitsToUint(dir), floatBitsToUint(tmax)); }
-
+// The shadow ray from `origin` to `origin + dir` in slot k.
 void store_shadow_ray(uint k, vec3 origin, vec3 dir) {
-    shadow_rays[2u * k] = ray_word0(origin);
-    shadow_rays[2u * k + 1u] = ray_word1(dir, 1.0);
+    Ray ray = Ray(origin, 0.0, dir, 1.0);
+    shadow_rays[2u * k] = ray_word0(ray);
+    shadow_rays[2u * k + 1u] = ray_word1(ray);
 }
 
 const float PI = 3.14159265358979;
@@ -225,8 +224,9 @@ void continue_path(Vertex v, Path path, float p_mirror, float bounce_share, bool
         uint slot = atomicAdd(counters[block + RC_NEXT], 1u);
         // Grow the next wave's indirect dispatch by a workgroup when one begins.
         if (slot % RENDER_WORKGROUP_SIZE == 0u) atomicAdd(counters[block + RC_ARGS], 1u);
-        rays_next[2u * slot] = ray_word0(v.origin);
-        rays_next[2u * slot + 1u] = ray_word1(dir, INF);
+        Ray ray = Ray(v.origin, 0.0, dir, INF);
+        rays_next[2u * slot] = ray_word0(ray);
+        rays_next[2u * slot + 1u] = ray_word1(ray);
         store_path(slot, next);
     }
 }

@@ -13,6 +13,10 @@ Ray ray_from_words(uvec4 a, uvec4 b) {
     return ray;
 }
 
+// The two uvec4 words of a ray's 32-byte record (ray_from_words' inverse).
+uvec4 ray_word0(Ray ray) { return uvec4(floatBitsToUint(ray.origin), floatBitsToUint(ray.tmin)); }
+uvec4 ray_word1(Ray ray) { return uvec4(floatBitsToUint(ray.dir), floatBitsToUint(ray.tmax)); }
+
 // The direction as traced: denormal components count as zeros of the same sign
 // (as on GPUs that flush them; the CPU twins and the exact reference do the same).
 vec3 traced_dir(vec3 dir) {

@@ -598,7 +598,7 @@ impl Timestamps {
     /// wrote them all.
     pub fn ticks(&self, count: u32) -> Result<Vec<u64>> {
         let mut data = vec![0u64; count.min(self.count) as usize];
-        // SAFETY: the pool has `count` queries, and the caller waited for completion.
+        // SAFETY: the pool has at least `data.len()` queries, and the caller waited for completion.
         unsafe {
             self.ctx
                 .device

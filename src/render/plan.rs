@@ -71,6 +71,11 @@ pub struct RenderPlan {
     pub bounces: bool,
     /// Paths continue past their first hit (mirrors or bounces): a second queue.
     pub continue_paths: bool,
+    /// Waves of shading per sample (the camera rays' and those of the paths
+    /// they continue into): `max_depth` when paths continue, `bounces + 1` at
+    /// most without mirrors (every continuation is then a diffuse bounce, so
+    /// no path goes deeper), else 1.
+    pub waves: u32,
     /// Shadow rays exist: the any-hit pipeline, the shadow queue, the resolve pass.
     pub shadow_pass: bool,
     /// Camera rays jittered inside the pixel (more than one sample per pixel).
@@ -154,6 +159,11 @@ impl RenderPlan {
         let mirrors = mirror_tris > 0;
         let bounces = settings.bounces > 0 && !headlight;
         let continue_paths = settings.max_depth > 1 && (mirrors || bounces);
+        let waves = match (continue_paths || !skip, mirrors || !skip) {
+            (false, _) => 1,
+            (true, true) => settings.max_depth,
+            (true, false) => settings.max_depth.min(settings.bounces + 1),
+        };
         let headlight_shadows = headlight && !skip;
         let shadow_per_vertex = settings.lights.len() as u32
             + u32::from(emitter_tris > 0)
@@ -201,18 +211,11 @@ impl RenderPlan {
             "diffuse bounces: off (--bounces 0) -> skipped".into()
         });
         explain.push(if continue_paths {
-            match mirrors || !skip {
-                true => format!(
-                    "paths continue past the first hit (up to {} segments): second ray queue on",
-                    settings.max_depth
-                ),
-                false => format!(
-                    "paths continue past the first hit by diffuse bounces only (up to {} segments, no mirrors): second \
-                     ray queue on, {} waves per sample",
-                    settings.max_depth.min(settings.bounces + 1),
-                    settings.max_depth.min(settings.bounces + 1)
-                ),
-            }
+            format!(
+                "paths continue past the first hit (up to {waves} segments{}): second ray queue on, {waves} waves per \
+                 sample",
+                if mirrors || !skip { "" } else { ", diffuse bounces only: no mirrors" }
+            )
         } else {
             "paths end at their first hit (no mirrors, no bounces): second ray queue and its passes skipped".into()
         });
@@ -267,6 +270,7 @@ impl RenderPlan {
             ao: ao || !skip,
             bounces: bounces || !skip,
             continue_paths: continue_paths || !skip,
+            waves,
             shadow_pass: shadow_pass || !skip,
             jitter: settings.jitter && settings.spp > 1,
             raster: settings.primary == Primary::Raster,

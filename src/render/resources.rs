@@ -61,9 +61,7 @@ pub(super) struct Chunking {
     pub(super) chunk: u64,
     /// Shadow rays the shadow queue holds.
     pub(super) shadow_capacity: u64,
-    /// Waves of shading per sample (the camera rays' and those of the paths
-    /// they continue into): `max_depth` when paths continue (`bounces + 1` at
-    /// most without mirrors), else 1.
+    /// Waves of shading per sample ([`RenderPlan::waves`]).
     pub(super) waves: u32,
     /// Samples one submission records at most
     /// ([`RenderSettings::samples_per_submission`]).
@@ -91,13 +89,7 @@ impl Chunking {
             .min((SHADOW_QUEUE_BYTES / (entry_bytes * shadow_per_path)).max(1024))
             .min(limit / (largest * shadow_per_path))
             .max(1);
-        // Without mirrors every continuation is a diffuse bounce, so no path
-        // goes deeper than `bounces`: the waves after that would be empty.
-        let waves = match (plan.continue_paths, plan.mirrors) {
-            (false, _) => 1,
-            (true, true) => settings.max_depth,
-            (true, false) => settings.max_depth.min(settings.bounces + 1),
-        };
+        let waves = plan.waves;
         let batch = match settings.samples_per_submission {
             // Several chunks, or a visibility buffer drawn per sample (its render
             // pass is not ordered against the next sample's in one submission).

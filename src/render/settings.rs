@@ -60,13 +60,13 @@ pub struct RenderSettings {
     /// centre, so the pixel value is the radiance seen through that point (aliased
     /// edges, as one sample gives), and an area light's penumbra is a 2D integral
     /// over the lamp instead of a 4D one over pixel and lamp (docs/RENDERING.md,
-    /// "Light sampling").
+    /// "The light sample converges at the 2D rate").
     pub jitter: bool,
-    /// Samples recorded into one submission (0: automatic, enough for about
-    /// 2^18 paths per submission, at most 64; one when the image renders in
-    /// chunks or its first hits are rasterized). Each submission costs a host round trip; the images do not
-    /// depend on it. Checkpoints and `save_rays` end a submission where they
-    /// need the results.
+    /// Samples recorded into one submission: 0 (automatic) for about 2^18 paths
+    /// per submission; at most 64 either way, and 1 when the image renders in
+    /// chunks or its first hits are rasterized. Each submission costs a host
+    /// round trip; the images do not depend on it. Checkpoints and `save_rays`
+    /// end a submission where they need the results.
     pub samples_per_submission: u32,
     /// Keep the first hits of the first sample ([`RenderOutput::first_hits`](super::RenderOutput::first_hits)).
     pub keep_first_hits: bool,

@@ -9,7 +9,8 @@ use bytemuck::{Pod, Zeroable};
 
 gpu_struct! {
     /// One path of a ray queue, beside its `Ray` (32 bytes); written and read by
-    /// the kernels only, mirrored for its size.
+    /// the kernels only, mirrored for its size. render_shade.comp moves it as
+    /// two `uvec4` words in this field order (`load_path`, `store_path`).
     #[derive(Clone, Copy, Pod, Zeroable)]
     #[allow(dead_code)]
     pub struct GpuPath as Path {
@@ -30,7 +31,7 @@ gpu_struct! {
 
 gpu_struct! {
     /// One triangle for shading: its vertices, the material id's bits in `v0.w`
-    /// (48 bytes).
+    /// (48 bytes; render_shade.comp reads it as three `rgba32ui` texels).
     #[derive(Clone, Copy, Pod, Zeroable)]
     pub struct Surface {
         /// xyz: vertex 0; w: the material id (uint bits).
@@ -43,7 +44,7 @@ gpu_struct! {
 }
 
 gpu_struct! {
-    /// A material (48 bytes).
+    /// A material (48 bytes; render_shade.comp reads it as three `rgba32ui` texels).
     #[derive(Clone, Copy, Pod, Zeroable)]
     pub struct GpuMaterial as Material {
         /// xyz: Kd; w: Ns.
